@@ -1,0 +1,204 @@
+"""Frozen, validated configuration dataclasses for the crowd simulator.
+
+All lengths are metres, times seconds, speeds m/s and force strengths are accelerations (m/s^2, i.e.
+force per unit mass): the simulator multiplies them by the body mass before handing them to pymunk.
+Defaults come from the literature cited on each field and run as they are.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+
+def _positive(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a finite positive number, got {value!r}")
+
+
+def _non_negative(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value >= 0):
+        raise ValueError(f"{name} must be a finite non-negative number, got {value!r}")
+
+
+def _in_range(name: str, value: float, lo: float, hi: float) -> None:
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise ValueError(f"{name} must lie in [{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class SocialForceParams:
+    """Helbing–Molnár social force with an anisotropic exponential pedestrian repulsion.
+
+    Driving term: (v0 e - v) / tau (Helbing & Molnár 1995, tau = 0.5 s).
+    Pedestrian repulsion on i from j: A exp((r_i + r_j - d_ij) / B) n_ji w(phi), with the anisotropy
+    w = lam + (1 - lam)(1 + cos phi) / 2 (Helbing et al. 2000 circular specification; lam < 1 weakens
+    interactions from behind). A and B are calibrated so that the corridor reproduces Weidmann's
+    fundamental diagram (see tests/crowdsim/test_fundamental_diagram.py); B matches Helbing–Molnár's
+    sigma = 0.3 m.
+    Wall repulsion: A_w exp((r_i - d) / B_w) along the wall normal, d the centre-to-wall distance
+    (Helbing et al. 2000: A_w = 2000 N / 80 kg = 25 m/s^2, B_w = 0.08 m). Helbing–Molnár's
+    (U0 / R) exp(-d / R) with U0 = 10 m^2/s^2, R = 0.2 m pushes 4 m/s^2 from each jamb of a 1 m door,
+    more than the driving term, and blocks doors.
+    """
+
+    relaxation_time_s: float = 0.5
+    desired_speed_mean_mps: float = 1.34
+    desired_speed_std_mps: float = 0.26
+    desired_speed_min_mps: float = 0.5
+    desired_speed_max_mps: float = 2.0
+    max_speed_factor: float = 1.3  # speeds are capped at this times the desired speed
+    ped_strength_mps2: float = 2.0  # A
+    ped_range_m: float = 0.3  # B
+    anisotropy: float = 0.3  # lam in [0, 1]
+    wall_strength_mps2: float = 25.0  # A_w
+    wall_range_m: float = 0.08  # B_w
+    cutoff_m: float = 3.0  # neighbour search radius for pedestrian and wall interactions
+    arrival_radius_m: float = 0.3  # within this of the goal a pedestrian has arrived
+    slowdown_radius_m: float = 1.0  # the desired speed ramps down linearly inside this distance
+
+    def __post_init__(self) -> None:
+        for name in ("relaxation_time_s", "desired_speed_mean_mps", "ped_range_m", "wall_range_m",
+                     "cutoff_m", "arrival_radius_m", "slowdown_radius_m", "desired_speed_max_mps"):
+            _positive(name, getattr(self, name))
+        for name in ("desired_speed_std_mps", "desired_speed_min_mps", "ped_strength_mps2",
+                     "wall_strength_mps2"):
+            _non_negative(name, getattr(self, name))
+        _in_range("anisotropy", self.anisotropy, 0.0, 1.0)
+        if self.max_speed_factor < 1.0:
+            raise ValueError(f"max_speed_factor must be >= 1, got {self.max_speed_factor}")
+        if self.desired_speed_min_mps > self.desired_speed_max_mps:
+            raise ValueError("desired_speed_min_mps must not exceed desired_speed_max_mps")
+
+
+@dataclass(frozen=True)
+class GroupForceParams:
+    """Moussaïd et al. (2010) group terms, strengths as accelerations.
+
+    gaze: -beta1 alpha v, alpha the head rotation (rad) beyond the vision half-angle needed to see the
+    centre of mass of the other members; coherence: beta2 towards the group's centre of mass when farther
+    than (n - 1) / 2 m; repulsion: beta3 away from each member closer than d0 (centre to centre).
+    """
+
+    gaze_strength: float = 4.0  # beta1, 1/s (multiplies alpha [rad] * v [m/s])
+    coherence_strength_mps2: float = 3.0  # beta2
+    repulsion_strength_mps2: float = 1.0  # beta3
+    repulsion_distance_m: float = 0.8  # d0
+    vision_half_angle_deg: float = 90.0
+
+    def __post_init__(self) -> None:
+        for name in ("gaze_strength", "coherence_strength_mps2", "repulsion_strength_mps2"):
+            _non_negative(name, getattr(self, name))
+        _positive("repulsion_distance_m", self.repulsion_distance_m)
+        _in_range("vision_half_angle_deg", self.vision_half_angle_deg, 0.0, 180.0)
+
+
+@dataclass(frozen=True)
+class GroupConfig:
+    """How groups are drawn and which group events happen.
+
+    Group sizes follow a zero-truncated Poisson with rate `size_poisson_rate`, capped at `max_size`
+    (lambda = 1.1 puts about two thirds of people in groups, mostly pairs; FIELD_NOTES). A group of
+    size n walks at a shared speed drawn from N(1.34 - 0.04 (n - 1), 0.26) m/s, clipped.
+    Events are Poisson processes per group, rates in 1/s: `leave_rate_hz` makes one member of a group
+    of two or more leave (new goal, new singleton label); `merge_rate_hz` makes a group join the
+    nearest other group within `merge_distance_m` walking the same way (shared goal and label).
+    """
+
+    size_poisson_rate: float = 1.1
+    max_size: int = 5
+    speed_drop_per_member_mps: float = 0.04
+    formation_spacing_m: float = 0.75  # lateral distance between neighbours in the abreast formation
+    leave_rate_hz: float = 0.0
+    merge_rate_hz: float = 0.0
+    merge_distance_m: float = 4.0
+
+    def __post_init__(self) -> None:
+        _non_negative("size_poisson_rate", self.size_poisson_rate)
+        if not isinstance(self.max_size, int) or self.max_size < 1:
+            raise ValueError(f"max_size must be an integer >= 1, got {self.max_size!r}")
+        for name in ("speed_drop_per_member_mps", "leave_rate_hz", "merge_rate_hz"):
+            _non_negative(name, getattr(self, name))
+        _positive("formation_spacing_m", self.formation_spacing_m)
+        _positive("merge_distance_m", self.merge_distance_m)
+
+    def size_probabilities(self) -> list[float]:
+        """Probability of each group size 1..max_size (zero-truncated Poisson, tail folded into max)."""
+        lam = self.size_poisson_rate
+        if lam == 0:
+            return [1.0] + [0.0] * (self.max_size - 1)
+        raw = [lam**k / math.factorial(k) for k in range(1, self.max_size + 1)]
+        norm = math.exp(lam) - 1.0
+        probs = [p / norm for p in raw]
+        probs[-1] += max(0.0, 1.0 - sum(probs))
+        return probs
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """The external agent slot. `visible` makes pedestrians repel from the robot like from a person."""
+
+    visible: bool = True
+    radius_m: float = 0.3
+
+    def __post_init__(self) -> None:
+        _positive("radius_m", self.radius_m)
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Top-level simulator configuration.
+
+    The recording step (dataset frame) is `record_dt_s`; social forces are re-evaluated every
+    `force_dt_s` and pymunk integrates contacts with `physics_substeps` sub-steps per force step
+    (sub-step = force_dt_s / physics_substeps <= 0.05 s).
+    """
+
+    scenario: str = "plaza"
+    n_pedestrians: int = 40
+    record_dt_s: float = 0.4
+    force_dt_s: float = 0.1
+    physics_substeps: int = 2
+    radius_min_m: float = 0.22
+    radius_max_m: float = 0.28
+    mass_kg: float = 80.0
+    social: SocialForceParams = field(default_factory=SocialForceParams)
+    group_forces: GroupForceParams = field(default_factory=GroupForceParams)
+    groups: GroupConfig = field(default_factory=GroupConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    scenario_options: tuple[tuple[str, float], ...] = ()  # scenario-specific overrides (name, value)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.n_pedestrians, int) or self.n_pedestrians < 1:
+            raise ValueError(f"n_pedestrians must be an integer >= 1, got {self.n_pedestrians!r}")
+        if self.groups.max_size > self.n_pedestrians:
+            raise ValueError(
+                f"groups.max_size={self.groups.max_size} is larger than the crowd "
+                f"(n_pedestrians={self.n_pedestrians})"
+            )
+        for name in ("record_dt_s", "force_dt_s", "mass_kg", "radius_min_m", "radius_max_m"):
+            _positive(name, getattr(self, name))
+        if self.radius_min_m > self.radius_max_m:
+            raise ValueError("radius_min_m must not exceed radius_max_m")
+        if not isinstance(self.physics_substeps, int) or self.physics_substeps < 1:
+            raise ValueError(f"physics_substeps must be an integer >= 1, got {self.physics_substeps!r}")
+        if self.physics_dt_s > 0.05 + 1e-12:
+            raise ValueError(f"physics sub-step {self.physics_dt_s:.3f} s exceeds 0.05 s; raise physics_substeps")
+        ratio = self.record_dt_s / self.force_dt_s
+        if abs(ratio - round(ratio)) > 1e-9:
+            raise ValueError("record_dt_s must be an integer multiple of force_dt_s")
+
+    @property
+    def physics_dt_s(self) -> float:
+        return self.force_dt_s / self.physics_substeps
+
+    @property
+    def force_steps_per_record(self) -> int:
+        return round(self.record_dt_s / self.force_dt_s)
+
+    def option(self, name: str, default: float) -> float:
+        return dict(self.scenario_options).get(name, default)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)

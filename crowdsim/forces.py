@@ -1,0 +1,142 @@
+"""Social forces as vectorised pure functions of arrays.
+
+Every function returns accelerations in m/s^2 (force per unit mass), shape (N, 2). Inputs are the
+active pedestrians only: positions `pos` (N, 2) m, velocities `vel` (N, 2) m/s, radii (N,) m, headings
+`e` (N, 2) unit vectors (walking direction), group labels (N,) int.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdsim.config import GroupForceParams, SocialForceParams
+
+_EPS = 1e-9
+
+
+def unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Row-wise unit vectors and norms of v (..., 2); zero rows give a zero unit vector."""
+    norm = np.sqrt(np.einsum("...k,...k->...", v, v))
+    safe = np.where(norm > _EPS, norm, 1.0)
+    return v / safe[..., None] * (norm > _EPS)[..., None], norm
+
+
+def desired_velocity(pos: np.ndarray, goal: np.ndarray, speed: np.ndarray,
+                     params: SocialForceParams) -> np.ndarray:
+    """(N, 2) desired velocity: towards the goal at `speed` (N,), ramping to zero inside the slowdown radius."""
+    e, dist = unit(goal - pos)
+    ramp = np.clip(dist / params.slowdown_radius_m, 0.0, 1.0)
+    return e * (speed * ramp)[:, None]
+
+
+def driving_acc(vel: np.ndarray, v_desired: np.ndarray, params: SocialForceParams) -> np.ndarray:
+    """Relaxation towards the desired velocity: (v_desired - v) / tau."""
+    return (v_desired - vel) / params.relaxation_time_s
+
+
+def pair_terms(diff: np.ndarray, r_sum: np.ndarray, e_i: np.ndarray, e_j: np.ndarray,
+               params: SocialForceParams) -> tuple[np.ndarray, np.ndarray]:
+    """Repulsion within P pairs: (acc on i, acc on j), each (P, 2).
+
+    diff = pos_i - pos_j (P, 2), r_sum = r_i + r_j (P,), e_i / e_j headings (P, 2). The magnitude is
+    A exp((r_sum - d) / B); each side is weighted by its own anisotropy factor
+    w = lam + (1 - lam)(1 + cos phi) / 2, phi the angle between its heading and the direction to the
+    other. With lam = 1 the two accelerations are exactly opposite (Newton's third law).
+    """
+    n, dist = unit(diff)
+    mag = params.ped_strength_mps2 * np.exp((r_sum - dist) / params.ped_range_m)
+    lam = params.anisotropy
+    cos_i = -np.einsum("pk,pk->p", n, e_i)  # j ahead of i -> e_i points along -n
+    cos_j = np.einsum("pk,pk->p", n, e_j)
+    w_i = lam + (1.0 - lam) * 0.5 * (1.0 + cos_i)
+    w_j = lam + (1.0 - lam) * 0.5 * (1.0 + cos_j)
+    return n * (mag * w_i)[:, None], -n * (mag * w_j)[:, None]
+
+
+def scatter_add(n: int, idx: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Sum rows of values (P, 2) into an (n, 2) array at indices idx (P,)."""
+    out = np.empty((n, 2))
+    out[:, 0] = np.bincount(idx, weights=values[:, 0], minlength=n)
+    out[:, 1] = np.bincount(idx, weights=values[:, 1], minlength=n)
+    return out
+
+
+def pedestrian_acc(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.ndarray, j: np.ndarray,
+                   params: SocialForceParams) -> np.ndarray:
+    """(N, 2) total pedestrian repulsion given neighbour pairs (i, j) (P,) from the spatial index."""
+    acc_i, acc_j = pair_terms(pos[i] - pos[j], radius[i] + radius[j], e[i], e[j], params)
+    n = len(pos)
+    return scatter_add(n, i, acc_i) + scatter_add(n, j, acc_j)
+
+
+def closest_points_on_segments(pos: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """(N, S, 2) closest point on each segment (S, 2, 2) to each position (N, 2)."""
+    a = segments[:, 0]
+    ab = segments[:, 1] - a
+    len2 = np.maximum(np.einsum("sk,sk->s", ab, ab), _EPS)
+    t = np.einsum("nsk,sk->ns", pos[:, None, :] - a[None], ab) / len2
+    t = np.clip(t, 0.0, 1.0)
+    return a[None] + t[..., None] * ab[None]
+
+
+def wall_acc(pos: np.ndarray, radius: np.ndarray, segments: np.ndarray,
+             params: SocialForceParams) -> np.ndarray:
+    """(N, 2) wall repulsion A_w exp((r - d) / B_w) from every segment (S, 2, 2) closer than the cut-off."""
+    if len(segments) == 0 or len(pos) == 0:
+        return np.zeros((len(pos), 2))
+    n, dist = unit(pos[:, None, :] - closest_points_on_segments(pos, segments))
+    mag = params.wall_strength_mps2 * np.exp((radius[:, None] - dist) / params.wall_range_m)
+    mag = np.where(dist < params.cutoff_m, mag, 0.0)
+    return np.einsum("ns,nsk->nk", mag, n)
+
+
+def _group_sums(label: np.ndarray, values: np.ndarray, n_groups: int) -> np.ndarray:
+    out = np.empty((n_groups, values.shape[1]))
+    for k in range(values.shape[1]):
+        out[:, k] = np.bincount(label, weights=values[:, k], minlength=n_groups)
+    return out
+
+
+def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray, i: np.ndarray,
+              j: np.ndarray, params: GroupForceParams) -> np.ndarray:
+    """(N, 2) Moussaïd et al. (2010) group terms: gaze, coherence and intra-group repulsion.
+
+    label: (N,) dense group labels 0..G-1. Pairs (i, j) from the spatial index are reused for the
+    repulsion between members closer than d0. Singletons receive no group force.
+    """
+    n = len(pos)
+    n_groups = int(label.max()) + 1 if n else 0
+    size = np.bincount(label, minlength=n_groups)[label].astype(float)
+    in_group = size > 1
+    centre = _group_sums(label, pos, n_groups)[label] / size[:, None]
+    # Gaze: rotate the head towards the other members' centre; beyond the vision field, slow down.
+    others = (centre * size[:, None] - pos) / np.maximum(size - 1.0, 1.0)[:, None]
+    to_others, _ = unit(others - pos)
+    angle = np.arccos(np.clip(np.einsum("nk,nk->n", e, to_others), -1.0, 1.0))
+    alpha = np.maximum(angle - np.deg2rad(params.vision_half_angle_deg), 0.0)
+    acc = -params.gaze_strength * (alpha * in_group)[:, None] * vel
+    # Coherence: attraction to the centre of mass once farther than (n - 1) / 2 m (smoothed over 0.25 m).
+    to_centre, d_centre = unit(centre - pos)
+    q = np.clip((d_centre - 0.5 * (size - 1.0)) / 0.25, 0.0, 1.0) * in_group
+    acc += params.coherence_strength_mps2 * q[:, None] * to_centre
+    # Repulsion between members closer than d0.
+    same = label[i] == label[j]
+    ii, jj = i[same], j[same]
+    nvec, dist = unit(pos[ii] - pos[jj])
+    rep = nvec * (params.repulsion_strength_mps2 * (dist < params.repulsion_distance_m))[:, None]
+    acc += scatter_add(n, ii, rep) - scatter_add(n, jj, rep)
+    return acc
+
+
+def headings(vel: np.ndarray, v_desired: np.ndarray, min_speed_mps: float = 0.1) -> np.ndarray:
+    """(N, 2) walking direction: the velocity direction, or the desired direction when nearly at rest."""
+    e_v, speed = unit(vel)
+    e_d, _ = unit(v_desired)
+    return np.where((speed > min_speed_mps)[:, None], e_v, e_d)
+
+
+def cap_speed(vel: np.ndarray, max_speed: np.ndarray) -> np.ndarray:
+    """Scale rows of vel (N, 2) whose norm exceeds max_speed (N,) back onto the limit."""
+    speed = np.sqrt(np.einsum("nk,nk->n", vel, vel))
+    scale = np.where(speed > max_speed, max_speed / np.maximum(speed, _EPS), 1.0)
+    return vel * scale[:, None]

@@ -1,0 +1,271 @@
+"""The crowd simulator: social forces on pymunk bodies, groups with ground-truth labels, a robot slot.
+
+`CrowdSimulator(config).reset(seed)` builds a crowd; each `step()` advances one recording step
+(`record_dt_s`, 0.4 s by default): social forces are recomputed every `force_dt_s` and pymunk resolves
+contacts in sub-steps of at most 0.05 s. All randomness comes from the Generator made in `reset`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from crowdsim import forces
+from crowdsim.config import SimConfig
+from crowdsim.events import apply_events
+from crowdsim.groups import (
+    draw_group_size,
+    draw_group_sizes,
+    formation_offsets,
+    group_speed,
+    hex_lattice,
+    placement_ok,
+    rotate_to,
+)
+from crowdsim.neighbors import neighbor_pairs
+from crowdsim.scenarios import Scenario, make_scenario
+from crowdsim.state import CrowdState, Slots
+from crowdsim.world import PhysicsWorld
+
+
+@dataclass
+class Robot:
+    pos: np.ndarray  # (2,) m
+    vel: np.ndarray  # (2,) m/s
+    radius_m: float
+
+
+class CrowdSimulator:
+    """One crowd in one scenario. See the module docstring for the step structure."""
+
+    def __init__(self, config: SimConfig | None = None, scenario: Scenario | None = None) -> None:
+        self.config = config or SimConfig()
+        self.scenario = scenario or make_scenario(self.config.scenario, dict(self.config.scenario_options))
+        self.rng = np.random.default_rng(0)
+        self.robot: Robot | None = None
+        self._reset_storage()
+
+    # ----------------------------------------------------------------------------------------- setup
+    def _reset_storage(self) -> None:
+        self.slots = Slots.empty(self.config.n_pedestrians)
+        self.world = PhysicsWorld(self.scenario.walls)
+        self.frame = 0
+        self.time_s = 0.0
+        self._next_ped_id = 1
+        self._next_label = 0
+        self.n_spawned = 0
+        self.n_exited = 0
+
+    def reset(self, seed: int | None = None) -> CrowdState:
+        """Start a new crowd. The same seed and config give the same run, bit for bit."""
+        self.rng = np.random.default_rng(seed)
+        self._reset_storage()
+        self.robot = None
+        if self.scenario.dense_spawn is not None:
+            self._spawn_dense()
+        else:
+            self._spawn_initial()
+        return self.state()
+
+    def _spawn_initial(self) -> None:
+        cfg = self.config
+        progress_max = 0.0 if self.scenario.on_arrival != "remove" or self.scenario.periodic_x else 0.8
+        if self.scenario.periodic_x is not None:
+            progress_max = 0.0
+        for size in draw_group_sizes(self.rng, cfg.n_pedestrians, cfg.groups):
+            if not self._try_spawn_group(size, progress_max, tries=200):
+                raise RuntimeError(
+                    f"could not place a group of {size} in scenario {self.scenario.name!r} with "
+                    f"{cfg.n_pedestrians} pedestrians: the scene is too small for this crowd"
+                )
+
+    def _spawn_dense(self) -> None:
+        density = float(self.scenario.options.get("density", 0.0))
+        sites = hex_lattice(self.scenario.dense_spawn, density)
+        n = self.config.n_pedestrians
+        if len(sites) < n:
+            raise ValueError(f"the dense spawn area holds {len(sites)} sites at {density}/m^2, fewer than {n}")
+        if self.scenario.periodic_x is not None:  # fill the ring uniformly
+            sites = sites[np.sort(self.rng.choice(len(sites), n, replace=False))]
+        else:  # fill from the exit backwards
+            door = np.array([self.scenario.bounds[2], 0.5 * (self.scenario.bounds[1] + self.scenario.bounds[3])])
+            sites = sites[np.argsort(np.linalg.norm(sites - door, axis=1), kind="stable")[:n]]
+        start = 0
+        for size in draw_group_sizes(self.rng, n, self.config.groups):
+            _, target = self.scenario.draw_flow(self.rng)
+            pos = sites[start:start + size] + self.rng.normal(0.0, 0.005, (size, 2))
+            self._add_group(pos, np.repeat(target[None], size, 0), self._radii(size))
+            start += size
+
+    def _radii(self, size: int) -> np.ndarray:
+        return self.rng.uniform(self.config.radius_min_m, self.config.radius_max_m, size)
+
+    def _try_spawn_group(self, size: int, progress_max: float, tries: int) -> bool:
+        """Place a group in formation at a random flow origin; False if no clear spot was found."""
+        s = self.slots
+        act = s.active
+        for _ in range(tries):
+            origin, target = self.scenario.draw_flow(self.rng)
+            if progress_max > 0:
+                origin = origin + self.rng.uniform(0.0, progress_max) * (target - origin)
+            direction = target - origin
+            local = formation_offsets(size, self.config.groups.formation_spacing_m)
+            offsets = rotate_to(local - local.mean(axis=0), direction)
+            radius = self._radii(size)
+            pos = origin + offsets
+            if placement_ok(pos, radius, s.pos[act], s.radius[act], self.scenario.walls):
+                lateral = rotate_to(local * np.array([0.0, 1.0]), direction)
+                self._add_group(pos, target + lateral, radius)
+                return True
+        return False
+
+    def _add_group(self, pos: np.ndarray, goals: np.ndarray, radius: np.ndarray) -> None:
+        size = len(pos)
+        free = np.flatnonzero(~self.slots.active)
+        if len(free) < size:
+            raise RuntimeError("no free pedestrian slots")
+        label = self._new_label()
+        speed = group_speed(self.rng, size, self.config.social, self.config.groups)
+        for k, slot in enumerate(free[:size]):
+            self.slots.activate(slot, self._next_ped_id, label, pos[k], goals[k], radius[k], speed)
+            self.world.add(int(slot), pos[k], np.zeros(2), radius[k], self.config.mass_kg)
+            self._next_ped_id += 1
+        self.n_spawned += size
+
+    def _new_label(self) -> int:
+        self._next_label += 1
+        return self._next_label - 1
+
+    # ------------------------------------------------------------------------------------------ robot
+    def set_robot(self, pos: np.ndarray, vel: np.ndarray, radius_m: float | None = None) -> None:
+        """Place the external agent for the next step: pos (2,) m, vel (2,) m/s, radius m."""
+        pos = np.asarray(pos, dtype=float)
+        vel = np.asarray(vel, dtype=float)
+        radius = self.config.robot.radius_m if radius_m is None else float(radius_m)
+        if pos.shape != (2,) or vel.shape != (2,):
+            raise ValueError(f"robot pos and vel must have shape (2,), got {pos.shape} and {vel.shape}")
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel)) and np.isfinite(radius)) or radius <= 0:
+            raise ValueError(f"robot state must be finite with a positive radius: pos={pos}, vel={vel}, "
+                             f"radius={radius}")
+        self.robot = Robot(pos.copy(), vel.copy(), radius)
+
+    def clear_robot(self) -> None:
+        self.robot = None
+
+    # ------------------------------------------------------------------------------------------- step
+    def step(self) -> CrowdState:
+        """Advance one recording step and return the new state."""
+        for _ in range(self.config.force_steps_per_record):
+            self._force_step()
+        self.world.read(self.slots.pos, self.slots.vel)
+        self._wrap_periodic()
+        self._arrivals()
+        apply_events(self)
+        if self.scenario.continuous:
+            self._inflow()
+        self.frame += 1
+        self.time_s = self.frame * self.config.record_dt_s
+        return self.state()
+
+    def accelerations(self) -> tuple[np.ndarray, np.ndarray]:
+        """Social accelerations (n_active, 2) m/s^2 and the active slot indices (n_active,)."""
+        s, cfg = self.slots, self.config
+        idx = np.flatnonzero(s.active)
+        pos, vel = s.pos[idx], s.vel[idx]
+        if self.scenario.periodic_x is not None:
+            s.goal[idx, 0] = pos[:, 0] + 5.0
+        v_des = forces.desired_velocity(pos, s.goal[idx], s.speed[idx], cfg.social)
+        e = forces.headings(vel, v_des)
+        radius = s.radius[idx]
+        if self.robot is not None and cfg.robot.visible:
+            r = self.robot
+            e_r, _ = forces.unit(r.vel[None])
+            pos_all = np.concatenate([pos, r.pos[None]])
+            rad_all, e_all = np.append(radius, r.radius_m), np.concatenate([e, e_r])
+        else:
+            pos_all, rad_all, e_all = pos, radius, e
+        pos_all, rad_all, e_all = self._periodic_ghosts(pos_all, rad_all, e_all)
+        i, j = neighbor_pairs(pos_all, cfg.social.cutoff_m)
+        acc = forces.pedestrian_acc(pos_all, rad_all, e_all, i, j, cfg.social)[: len(idx)]
+        acc += forces.driving_acc(vel, v_des, cfg.social)
+        acc += forces.wall_acc(pos, radius, self.scenario.walls, cfg.social)
+        inner = (i < len(idx)) & (j < len(idx))
+        acc += forces.group_acc(pos, vel, e, s.dense_labels(idx), i[inner], j[inner], cfg.group_forces)
+        return acc, idx
+
+    def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray,
+                         e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Append shifted copies of agents within the cut-off of a periodic seam, so that interactions
+        reach across it. Real agents keep their row indices; ghosts come after them."""
+        if self.scenario.periodic_x is None:
+            return pos, radius, e
+        x0, x1 = self.scenario.periodic_x
+        cut = self.config.social.cutoff_m
+        near_lo = np.flatnonzero(pos[:, 0] < x0 + cut)
+        near_hi = np.flatnonzero(pos[:, 0] > x1 - cut)
+        ghosts = np.concatenate([pos[near_lo] + [x1 - x0, 0.0], pos[near_hi] - [x1 - x0, 0.0]])
+        src = np.concatenate([near_lo, near_hi])
+        return np.concatenate([pos, ghosts]), np.append(radius, radius[src]), np.concatenate([e, e[src]])
+
+    def _force_step(self) -> None:
+        s, cfg = self.slots, self.config
+        self.world.read(s.pos, s.vel)
+        if not s.active.any():
+            return
+        acc, idx = self.accelerations()
+        force = np.zeros_like(s.pos)
+        force[idx] = acc * cfg.mass_kg
+        s.vel[idx] = forces.cap_speed(s.vel[idx], s.speed[idx] * cfg.social.max_speed_factor)
+        self.world.write(s.vel, force)
+        for k in range(cfg.physics_substeps):
+            if k:
+                self.world.write_force(force)
+            self.world.step(cfg.physics_dt_s)
+
+    def _wrap_periodic(self) -> None:
+        if self.scenario.periodic_x is None:
+            return
+        x0, x1 = self.scenario.periodic_x
+        for slot in np.flatnonzero(self.slots.active & (self.slots.pos[:, 0] > x1)):
+            self.slots.pos[slot, 0] -= x1 - x0
+            self.world.teleport(int(slot), self.slots.pos[slot])
+
+    def _arrivals(self) -> None:
+        s, scen = self.slots, self.scenario
+        idx = np.flatnonzero(s.active)
+        dist = np.linalg.norm(s.pos[idx] - s.goal[idx], axis=1)
+        if scen.on_arrival == "remove":
+            for slot in idx[dist < scen.exit_radius_m]:
+                self.world.remove(int(slot))
+                s.deactivate(slot)
+                self.n_exited += 1
+        elif scen.on_arrival == "new_goal":
+            for label in np.unique(s.label[idx[dist < scen.exit_radius_m]]):
+                self.retarget_group(int(label))
+
+    def retarget_group(self, label: int, destination: np.ndarray | None = None) -> None:
+        """Give every member of group `label` a new shared destination (in formation)."""
+        s = self.slots
+        members = np.flatnonzero(s.active & (s.label == label))
+        centre = s.pos[members].mean(axis=0)
+        if destination is None:
+            destination = self.scenario.new_destination(self.rng, centre)
+        local = formation_offsets(len(members), self.config.groups.formation_spacing_m)
+        lateral = rotate_to(local * np.array([0.0, 1.0]), destination - centre)
+        # Keep members on the side they already walk on: match both orderings across the walking line.
+        perp = np.array([-(destination - centre)[1], (destination - centre)[0]])
+        by_side = members[np.argsort((s.pos[members] - centre) @ perp, kind="stable")]
+        s.goal[by_side] = destination + lateral[np.argsort(lateral @ perp, kind="stable")]
+
+    def _inflow(self) -> None:
+        free = int((~self.slots.active).sum())
+        if free == 0:
+            return
+        size = draw_group_size(self.rng, self.config.groups, free)
+        self._try_spawn_group(size, 0.0, tries=3)
+
+    # ------------------------------------------------------------------------------------------ state
+    def state(self) -> CrowdState:
+        """A copy of the current state (capacity-sized arrays with an active mask)."""
+        return self.slots.snapshot(self.frame, self.time_s)

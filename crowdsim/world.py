@@ -1,0 +1,124 @@
+"""The physical world: the only module that imports pymunk.
+
+Each pedestrian is a dynamic circle body (infinite moment, so it does not spin); walls and obstacles
+are static segments on the space's static body. State moves in and out through pymunk's batch API,
+so one call covers all bodies (FIELD_NOTES: body-by-body access costs ~100x more).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pymunk
+import pymunk.batch as batch
+
+_PV = batch.BodyFields.POSITION | batch.BodyFields.VELOCITY
+_VF = batch.BodyFields.VELOCITY | batch.BodyFields.FORCE
+
+
+class PhysicsWorld:
+    """Pedestrian bodies addressed by slot index, static walls given as segments (S, 2, 2) in metres.
+
+    `collision_slop_m` is pymunk's allowed overlap before contacts push back; keep it at a few mm.
+    """
+
+    def __init__(self, segments: np.ndarray, wall_thickness_m: float = 0.02,
+                 collision_slop_m: float = 0.002, iterations: int = 20) -> None:
+        self.space = pymunk.Space()
+        self.space.iterations = iterations
+        self.space.collision_slop = collision_slop_m
+        self.space.collision_bias = pow(1.0 - 0.3, 60.0)  # correct overlap faster than pymunk's default
+        for a, b in np.asarray(segments, dtype=float).reshape(-1, 2, 2):
+            seg = pymunk.Segment(self.space.static_body, tuple(a), tuple(b), wall_thickness_m)
+            seg.friction = 0.0
+            seg.elasticity = 0.0
+            self.space.add(seg)
+        self._bodies: dict[int, pymunk.Body] = {}
+        self._slot_of_body: dict[int, int] = {}
+        self._order: np.ndarray = np.empty(0, np.int64)
+        self._is_ped: np.ndarray = np.empty(0, bool)
+        self._dirty = False
+        self._buf_get = batch.Buffer()
+        self._buf_set = batch.Buffer()
+
+    def add(self, slot: int, pos: np.ndarray, vel: np.ndarray, radius_m: float, mass_kg: float) -> None:
+        """Add the pedestrian body of `slot` at pos (2,) m with velocity vel (2,) m/s."""
+        if slot in self._bodies:
+            raise ValueError(f"slot {slot} already has a body")
+        body = pymunk.Body(mass_kg, float("inf"))
+        body.position = (float(pos[0]), float(pos[1]))
+        body.velocity = (float(vel[0]), float(vel[1]))
+        shape = pymunk.Circle(body, float(radius_m))
+        shape.friction = 0.0
+        shape.elasticity = 0.0
+        self.space.add(body, shape)
+        self._bodies[slot] = body
+        self._slot_of_body[body.id] = slot
+        self._dirty = True
+
+    def remove(self, slot: int) -> None:
+        body = self._bodies.pop(slot)
+        del self._slot_of_body[body.id]
+        self.space.remove(body, *body.shapes)
+        self._dirty = True
+
+    def teleport(self, slot: int, pos: np.ndarray) -> None:
+        """Move a body without dynamics (used by periodic scenarios)."""
+        self._bodies[slot].position = (float(pos[0]), float(pos[1]))
+
+    def _body_order(self) -> np.ndarray:
+        """Slots in pymunk's iteration order (it changes whenever a body is removed); -1 marks the
+        static body that carries the walls, which the batch API also visits."""
+        if self._dirty:
+            buf = batch.Buffer()
+            batch.get_space_bodies(self.space, batch.BodyFields.BODY_ID, buf)
+            ids = np.frombuffer(buf.int_buf(), dtype=np.int64)
+            self._order = np.array([self._slot_of_body.get(int(b), -1) for b in ids], dtype=np.int64)
+            self._is_ped = self._order >= 0
+            self._dirty = False
+        return self._order
+
+    def _gather(self, rows: np.ndarray) -> np.ndarray:
+        """Rows (C, 2) in body order, zeros for non-pedestrian bodies."""
+        order = self._body_order()
+        out = np.zeros((len(order), 2))
+        out[self._is_ped] = rows[order[self._is_ped]]
+        return out
+
+    def read(self, pos_out: np.ndarray, vel_out: np.ndarray) -> None:
+        """Write every body's position and velocity into rows `slot` of pos_out / vel_out (C, 2)."""
+        order = self._body_order()
+        if len(order) == 0:
+            return
+        self._buf_get.clear()
+        batch.get_space_bodies(self.space, _PV, self._buf_get)
+        data = np.frombuffer(self._buf_get.float_buf(), dtype=np.float64).reshape(-1, 4)
+        ped = self._is_ped
+        pos_out[order[ped]] = data[ped, 0:2]
+        vel_out[order[ped]] = data[ped, 2:4]
+
+    def write(self, vel: np.ndarray, force: np.ndarray) -> None:
+        """Set velocity (C, 2) m/s and force (C, 2) N of every body from rows `slot`."""
+        order = self._body_order()
+        if len(order) == 0:
+            return
+        packed = np.ascontiguousarray(np.concatenate([self._gather(vel), self._gather(force)], axis=1).ravel())
+        self._packed = packed  # keep the memory alive while pymunk reads it
+        self._buf_set.set_float_buf(packed)
+        batch.set_space_bodies(self.space, _VF, self._buf_set)
+
+    def write_force(self, force: np.ndarray) -> None:
+        """Set only the force (C, 2) N; pymunk clears forces after every step."""
+        order = self._body_order()
+        if len(order) == 0:
+            return
+        packed = np.ascontiguousarray(self._gather(force).ravel())
+        self._packed = packed
+        self._buf_set.set_float_buf(packed)
+        batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._buf_set)
+
+    def step(self, dt_s: float) -> None:
+        self.space.step(dt_s)
+
+    @property
+    def n_bodies(self) -> int:
+        return len(self._bodies)
