@@ -57,13 +57,15 @@ class SocialForceParams:
     cutoff_m: float = 3.0  # neighbour search radius for pedestrian and wall interactions
     arrival_radius_m: float = 0.3  # within this of the goal a pedestrian has arrived
     slowdown_radius_m: float = 1.0  # the desired speed ramps down linearly inside this distance
+    fluctuation_mps2: float = 0.1  # std of a random acceleration per force step (Helbing–Molnár's fluctuations);
+    # it breaks the exact symmetry of head-on encounters, which otherwise deadlock
 
     def __post_init__(self) -> None:
         for name in ("relaxation_time_s", "desired_speed_mean_mps", "ped_range_m", "wall_range_m",
                      "cutoff_m", "arrival_radius_m", "slowdown_radius_m", "desired_speed_max_mps"):
             _positive(name, getattr(self, name))
         for name in ("desired_speed_std_mps", "desired_speed_min_mps", "ped_strength_mps2",
-                     "wall_strength_mps2"):
+                     "wall_strength_mps2", "fluctuation_mps2"):
             _non_negative(name, getattr(self, name))
         _in_range("anisotropy", self.anisotropy, 0.0, 1.0)
         if self.max_speed_factor < 1.0:
@@ -159,7 +161,7 @@ class SimConfig:
     n_pedestrians: int = 40
     record_dt_s: float = 0.4
     force_dt_s: float = 0.1
-    physics_substeps: int = 2
+    physics_substeps: int = 4
     radius_min_m: float = 0.22
     radius_max_m: float = 0.28
     mass_kg: float = 80.0

@@ -62,6 +62,7 @@ class CrowdSimulator:
         self.rng = np.random.default_rng(seed)
         self._reset_storage()
         self.robot = None
+        self.world.remove_robot()
         if self.scenario.dense_spawn is not None:
             self._spawn_dense()
         else:
@@ -149,9 +150,12 @@ class CrowdSimulator:
             raise ValueError(f"robot state must be finite with a positive radius: pos={pos}, vel={vel}, "
                              f"radius={radius}")
         self.robot = Robot(pos.copy(), vel.copy(), radius)
+        if self.config.robot.visible:
+            self.world.place_robot(pos, vel, radius)
 
     def clear_robot(self) -> None:
         self.robot = None
+        self.world.remove_robot()
 
     # ------------------------------------------------------------------------------------------- step
     def step(self) -> CrowdState:
@@ -181,7 +185,7 @@ class CrowdSimulator:
         if self.robot is not None and cfg.robot.visible:
             r = self.robot
             e_r, _ = forces.unit(r.vel[None])
-            pos_all = np.concatenate([pos, r.pos[None]])
+            pos_all = np.concatenate([pos, self.world.robot_position()[None]])
             rad_all, e_all = np.append(radius, r.radius_m), np.concatenate([e, e_r])
         else:
             pos_all, rad_all, e_all = pos, radius, e
@@ -192,6 +196,8 @@ class CrowdSimulator:
         acc += forces.wall_acc(pos, radius, self.scenario.walls, cfg.social)
         inner = (i < len(idx)) & (j < len(idx))
         acc += forces.group_acc(pos, vel, e, s.dense_labels(idx), i[inner], j[inner], cfg.group_forces)
+        if cfg.social.fluctuation_mps2 > 0:
+            acc += self.rng.normal(0.0, cfg.social.fluctuation_mps2, acc.shape)
         return acc, idx
 
     def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray,

@@ -37,6 +37,8 @@ class PhysicsWorld:
         self._order: np.ndarray = np.empty(0, np.int64)
         self._is_ped: np.ndarray = np.empty(0, bool)
         self._dirty = False
+        self._robot: pymunk.Body | None = None
+        self._robot_radius = 0.0
         self._buf_get = batch.Buffer()
         self._buf_set = batch.Buffer()
 
@@ -60,6 +62,29 @@ class PhysicsWorld:
         del self._slot_of_body[body.id]
         self.space.remove(body, *body.shapes)
         self._dirty = True
+
+    def place_robot(self, pos: np.ndarray, vel: np.ndarray, radius_m: float) -> None:
+        """Put the robot's kinematic disc at pos (2,) moving at vel (2,): pedestrians cannot pass through
+        it, and it is not pushed back. Called again, it moves the same body."""
+        if self._robot is None or self._robot_radius != radius_m:
+            self.remove_robot()
+            body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            shape = pymunk.Circle(body, float(radius_m))
+            shape.friction = 0.0
+            self.space.add(body, shape)
+            self._robot, self._robot_radius = body, radius_m
+            self._dirty = True
+        self._robot.position = (float(pos[0]), float(pos[1]))
+        self._robot.velocity = (float(vel[0]), float(vel[1]))
+
+    def robot_position(self) -> np.ndarray | None:
+        return None if self._robot is None else np.array(self._robot.position)
+
+    def remove_robot(self) -> None:
+        if self._robot is not None:
+            self.space.remove(self._robot, *self._robot.shapes)
+            self._robot = None
+            self._dirty = True
 
     def teleport(self, slot: int, pos: np.ndarray) -> None:
         """Move a body without dynamics (used by periodic scenarios)."""
@@ -104,7 +129,10 @@ class PhysicsWorld:
         packed = np.ascontiguousarray(np.concatenate([self._gather(vel), self._gather(force)], axis=1).ravel())
         self._packed = packed  # keep the memory alive while pymunk reads it
         self._buf_set.set_float_buf(packed)
+        robot_vel = None if self._robot is None else self._robot.velocity
         batch.set_space_bodies(self.space, _VF, self._buf_set)
+        if robot_vel is not None:  # the batch write zeroed it with the other non-pedestrian bodies
+            self._robot.velocity = robot_vel
 
     def write_force(self, force: np.ndarray) -> None:
         """Set only the force (C, 2) N; pymunk clears forces after every step."""

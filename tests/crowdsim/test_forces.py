@@ -1,0 +1,102 @@
+"""Force terms: symmetry, anisotropy, walls, groups and the neighbour index."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crowdsim import forces
+from crowdsim.config import GroupForceParams, SocialForceParams
+from crowdsim.neighbors import brute_force_pairs, neighbor_pairs
+
+
+def _random_crowd(n: int, seed: int):
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(0, 10, (n, 2))
+    e, _ = forces.unit(rng.normal(size=(n, 2)))
+    radius = rng.uniform(0.2, 0.3, n)
+    return pos, e, radius
+
+
+def test_pair_forces_are_antisymmetric_without_anisotropy():
+    pos, e, radius = _random_crowd(60, 0)
+    params = SocialForceParams(anisotropy=1.0)
+    i, j = neighbor_pairs(pos, params.cutoff_m)
+    acc_i, acc_j = forces.pair_terms(pos[i] - pos[j], radius[i] + radius[j], e[i], e[j], params)
+    np.testing.assert_allclose(acc_i, -acc_j, atol=1e-15)
+    total = forces.pedestrian_acc(pos, radius, e, i, j, params)
+    np.testing.assert_allclose(total.sum(axis=0), 0.0, atol=1e-10)  # no net momentum from interactions
+
+
+def test_pair_forces_act_along_the_line_of_centres_and_repel():
+    pos, e, radius = _random_crowd(40, 1)
+    params = SocialForceParams()
+    i, j = neighbor_pairs(pos, params.cutoff_m)
+    diff = pos[i] - pos[j]
+    acc_i, acc_j = forces.pair_terms(diff, radius[i] + radius[j], e[i], e[j], params)
+    cross = diff[:, 0] * acc_i[:, 1] - diff[:, 1] * acc_i[:, 0]
+    np.testing.assert_allclose(cross, 0.0, atol=1e-12)
+    assert np.all(np.einsum("pk,pk->p", acc_i, diff) > 0)  # i is pushed away from j
+    assert np.all(np.einsum("pk,pk->p", acc_j, diff) < 0)
+
+
+def test_anisotropy_weakens_interaction_from_behind():
+    params = SocialForceParams(anisotropy=0.3)
+    diff = np.array([[1.0, 0.0]])  # j is at -x of i
+    ahead = forces.pair_terms(diff, np.array([0.5]), np.array([[-1.0, 0.0]]), np.array([[1.0, 0.0]]), params)[0]
+    behind = forces.pair_terms(diff, np.array([0.5]), np.array([[1.0, 0.0]]), np.array([[1.0, 0.0]]), params)[0]
+    assert np.linalg.norm(behind) == pytest.approx(0.3 * np.linalg.norm(ahead))
+
+
+def test_repulsion_decays_exponentially_with_surface_gap():
+    params = SocialForceParams()
+    e = np.array([[0.0, 1.0]])
+    mags = [np.linalg.norm(forces.pair_terms(np.array([[d, 0.0]]), np.array([0.5]), e, e, params)[0])
+            for d in (0.6, 0.9)]
+    assert mags[0] / mags[1] == pytest.approx(np.exp(0.3 / params.ped_range_m))
+
+
+def test_wall_pushes_along_its_normal_and_ignores_far_walls():
+    params = SocialForceParams()
+    wall = np.array([[[0.0, 0.0], [10.0, 0.0]]])
+    pos = np.array([[5.0, 0.4], [5.0, 1.0], [5.0, 5.0]])
+    acc = forces.wall_acc(pos, np.full(3, 0.25), wall, params)
+    assert np.all(acc[:2, 1] > 0) and np.allclose(acc[:, 0], 0.0)
+    assert acc[0, 1] > acc[1, 1]
+    np.testing.assert_array_equal(acc[2], 0.0)
+
+
+def test_coherence_pulls_a_straggler_back_and_gaze_slows_the_leader():
+    params = GroupForceParams()
+    pos = np.array([[0.0, 0.0], [3.0, 0.0]])  # member 1 far ahead along +x
+    vel = np.array([[1.0, 0.0], [1.0, 0.0]])
+    e = np.array([[1.0, 0.0], [1.0, 0.0]])
+    acc = forces.group_acc(pos, vel, e, np.array([0, 0]), np.array([0]), np.array([1]), params)
+    assert acc[0, 0] > 0  # the one behind is pulled forward
+    assert acc[1, 0] < -params.coherence_strength_mps2  # the leader is pulled back and slowed by gaze
+    alone = forces.group_acc(pos, vel, e, np.array([0, 1]), np.array([0]), np.array([1]), params)
+    np.testing.assert_array_equal(alone, 0.0)  # singletons feel no group force
+
+
+def test_group_members_repel_inside_d0():
+    params = GroupForceParams()
+    pos = np.array([[0.0, 0.0], [0.0, 0.5]])
+    vel = np.zeros((2, 2))
+    e = np.array([[1.0, 0.0], [1.0, 0.0]])
+    acc = forces.group_acc(pos, vel, e, np.array([0, 0]), np.array([0]), np.array([1]), params)
+    assert acc[0, 1] < 0 < acc[1, 1]
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 50, 400])
+def test_cell_grid_finds_exactly_the_brute_force_pairs(n):
+    rng = np.random.default_rng(n)
+    pos = rng.uniform(-20, 20, (n, 2))
+    got = set(zip(*neighbor_pairs(pos, 3.0), strict=True))
+    want = set(zip(*brute_force_pairs(pos, 3.0), strict=True))
+    assert got == want
+
+
+def test_speed_cap_only_touches_fast_rows():
+    vel = np.array([[3.0, 4.0], [0.3, 0.4]])
+    capped = forces.cap_speed(vel, np.array([1.0, 1.0]))
+    np.testing.assert_allclose(capped, [[0.6, 0.8], [0.3, 0.4]])
