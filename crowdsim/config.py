@@ -35,7 +35,7 @@ class SocialForceParams:
     Pedestrian repulsion on i from j: A exp((r_i + r_j - d_ij) / B) n_ji w(phi), with the anisotropy
     w = lam + (1 - lam)(1 + cos phi) / 2 (Helbing et al. 2000 circular specification; lam < 1 weakens
     interactions from behind). A and B are calibrated so that the corridor reproduces Weidmann's
-    fundamental diagram (see tests/crowdsim/test_fundamental_diagram.py); B matches Helbing–Molnár's
+    fundamental diagram (see tests/crowdsim/test_fundamental_diagram.py); B is close to Helbing–Molnár's
     sigma = 0.3 m.
     Wall repulsion: A_w exp((r_i - d) / B_w) along the wall normal, d the centre-to-wall distance
     (Helbing et al. 2000: A_w = 2000 N / 80 kg = 25 m/s^2, B_w = 0.08 m). Helbing–Molnár's
@@ -49,8 +49,8 @@ class SocialForceParams:
     desired_speed_min_mps: float = 0.5
     desired_speed_max_mps: float = 2.0
     max_speed_factor: float = 1.3  # speeds are capped at this times the desired speed
-    ped_strength_mps2: float = 2.0  # A
-    ped_range_m: float = 0.3  # B
+    ped_strength_mps2: float = 2.2  # A
+    ped_range_m: float = 0.32  # B
     anisotropy: float = 0.3  # lam in [0, 1]
     wall_strength_mps2: float = 25.0  # A_w
     wall_range_m: float = 0.08  # B_w
