@@ -30,7 +30,7 @@ def test_bad_force_parameters_are_rejected(kwargs):
 
 
 def test_physics_sub_step_above_50_ms_is_rejected():
-    with pytest.raises(ValueError, match="0.05"):
+    with pytest.raises(ValueError, match=r"0\.05"):
         SimConfig(force_dt_s=0.2, physics_substeps=2)
 
 

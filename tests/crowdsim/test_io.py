@@ -65,7 +65,7 @@ def test_events_make_labels_change_over_time(tmp_path):
 def test_read_groups_file_rejects_garbage(tmp_path):
     bad = tmp_path / "g.txt"
     bad.write_text("1 2\n\n3 x\n")
-    with pytest.raises(ValueError, match="g.txt:3"):
+    with pytest.raises(ValueError, match=r"g\.txt:3"):
         read_groups_file(bad)
 
 
