@@ -23,7 +23,7 @@ from crowdsim.groups import (
     placement_ok,
     rotate_to,
 )
-from crowdsim.neighbors import neighbor_pairs
+from crowdsim.neighbors import neighbor_pairs, pedestrian_acc_fast
 from crowdsim.scenarios import Scenario, make_scenario
 from crowdsim.state import CrowdState, Slots
 from crowdsim.world import PhysicsWorld
@@ -191,7 +191,9 @@ class CrowdSimulator:
             pos_all, rad_all, e_all = pos, radius, e
         pos_all, rad_all, e_all = self._periodic_ghosts(pos_all, rad_all, e_all)
         i, j = neighbor_pairs(pos_all, cfg.social.cutoff_m)
-        acc = forces.pedestrian_acc(pos_all, rad_all, e_all, i, j, cfg.social)[: len(idx)]
+        sp = cfg.social
+        acc = pedestrian_acc_fast(pos_all, rad_all, e_all, i, j, sp.ped_strength_mps2, sp.ped_range_m,
+                                  sp.anisotropy)[: len(idx)]
         acc += forces.driving_acc(vel, v_des, cfg.social)
         acc += forces.wall_acc(pos, radius, self.scenario.walls, cfg.social)
         inner = (i < len(idx)) & (j < len(idx))

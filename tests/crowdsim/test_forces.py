@@ -100,3 +100,14 @@ def test_speed_cap_only_touches_fast_rows():
     vel = np.array([[3.0, 4.0], [0.3, 0.4]])
     capped = forces.cap_speed(vel, np.array([1.0, 1.0]))
     np.testing.assert_allclose(capped, [[0.6, 0.8], [0.3, 0.4]])
+
+
+def test_compiled_pair_kernel_matches_the_numpy_reference():
+    from crowdsim.neighbors import pedestrian_acc_fast
+
+    pos, e, radius = _random_crowd(300, 5)
+    params = SocialForceParams()
+    i, j = neighbor_pairs(pos, params.cutoff_m)
+    fast = pedestrian_acc_fast(pos, radius, e, i, j, params.ped_strength_mps2, params.ped_range_m,
+                               params.anisotropy)
+    np.testing.assert_allclose(fast, forces.pedestrian_acc(pos, radius, e, i, j, params), rtol=1e-12, atol=1e-12)
