@@ -88,32 +88,3 @@ def brute_force_pairs(pos: np.ndarray, cutoff_m: float) -> tuple[np.ndarray, np.
     keep = d < cutoff_m
     return i[keep].astype(np.int64), j[keep].astype(np.int64)
 
-
-@numba.njit(cache=True)
-def _pair_forces_kernel(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.ndarray, j: np.ndarray,
-                        strength: float, rng_m: float, lam: float) -> np.ndarray:
-    n = pos.shape[0]
-    acc = np.zeros((n, 2))
-    for p in range(i.shape[0]):
-        a, b = i[p], j[p]
-        dx = pos[a, 0] - pos[b, 0]
-        dy = pos[a, 1] - pos[b, 1]
-        d = np.sqrt(dx * dx + dy * dy)
-        if d < 1e-9:
-            continue
-        nx, ny = dx / d, dy / d
-        mag = strength * np.exp((radius[a] + radius[b] - d) / rng_m)
-        w_a = lam + (1.0 - lam) * 0.5 * (1.0 - (nx * e[a, 0] + ny * e[a, 1]))
-        w_b = lam + (1.0 - lam) * 0.5 * (1.0 + (nx * e[b, 0] + ny * e[b, 1]))
-        acc[a, 0] += mag * w_a * nx
-        acc[a, 1] += mag * w_a * ny
-        acc[b, 0] -= mag * w_b * nx
-        acc[b, 1] -= mag * w_b * ny
-    return acc
-
-
-def pedestrian_acc_fast(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.ndarray, j: np.ndarray,
-                        strength_mps2: float, range_m: float, anisotropy: float) -> np.ndarray:
-    """Compiled twin of `forces.pedestrian_acc` (same formula, one loop over pairs); tests check equality."""
-    return _pair_forces_kernel(np.ascontiguousarray(pos), radius, np.ascontiguousarray(e), i, j,
-                               float(strength_mps2), float(range_m), float(anisotropy))

@@ -41,6 +41,7 @@ class Scenario:
     periodic_x: tuple[float, float] | None = None
     exit_radius_m: float = 1.0
     dense_spawn: Rect | None = None  # initial crowd placed on a lattice here instead of by flows
+    interior: Rect | None = None  # initial groups start anywhere in here (instead of along their flow)
     options: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -178,7 +179,8 @@ def plaza(opt: Mapping[str, float]) -> Scenario:
         ((s - 1.5, g0 + m, s - m, g1 - m), (s + 1.0, g0 + m, s + 1.5, g1 - m)),  # east
     ]
     flows = tuple(Flow(gates[a][0], gates[b][1]) for a in range(4) for b in range(4) if a != b)
-    return Scenario("plaza", np.array(walls), (0.0, 0.0, s, s), flows, options=dict(opt))
+    return Scenario("plaza", np.array(walls), (0.0, 0.0, s, s), flows, interior=(1.0, 1.0, s - 1.0, s - 1.0),
+                    options=dict(opt))
 
 
 def circle_crossing(opt: Mapping[str, float]) -> Scenario:

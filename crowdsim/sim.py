@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crowdsim import forces
+from crowdsim import forces, kernels
 from crowdsim.config import SimConfig
 from crowdsim.events import apply_events
 from crowdsim.groups import (
@@ -23,7 +23,7 @@ from crowdsim.groups import (
     placement_ok,
     rotate_to,
 )
-from crowdsim.neighbors import neighbor_pairs, pedestrian_acc_fast
+from crowdsim.neighbors import neighbor_pairs
 from crowdsim.scenarios import Scenario, make_scenario
 from crowdsim.state import CrowdState, Slots
 from crowdsim.world import PhysicsWorld
@@ -44,6 +44,7 @@ class CrowdSimulator:
         self.scenario = scenario or make_scenario(self.config.scenario, dict(self.config.scenario_options))
         self.rng = np.random.default_rng(0)
         self.robot: Robot | None = None
+        self._params = kernels.pack_params(self.config.social, self.config.group_forces)
         self._reset_storage()
 
     # ----------------------------------------------------------------------------------------- setup
@@ -108,7 +109,10 @@ class CrowdSimulator:
         act = s.active
         for _ in range(tries):
             origin, target = self.scenario.draw_flow(self.rng)
-            if progress_max > 0:
+            if progress_max > 0 and self.scenario.interior is not None:
+                lo, hi = np.array(self.scenario.interior[:2]), np.array(self.scenario.interior[2:])
+                origin = lo + self.rng.uniform(0.0, 1.0, 2) * (hi - lo)
+            elif progress_max > 0:
                 origin = origin + self.rng.uniform(0.0, progress_max) * (target - origin)
             direction = target - origin
             local = formation_offsets(size, self.config.groups.formation_spacing_m)
@@ -172,8 +176,12 @@ class CrowdSimulator:
         self.time_s = self.frame * self.config.record_dt_s
         return self.state()
 
-    def accelerations(self) -> tuple[np.ndarray, np.ndarray]:
-        """Social accelerations (n_active, 2) m/s^2 and the active slot indices (n_active,)."""
+    def accelerations(self, reference: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Social accelerations (n_active, 2) m/s^2 and the active slot indices (n_active,).
+
+        reference=True evaluates the numpy functions of `crowdsim.forces` instead of the compiled kernel
+        (same formulas; used by tests). Fluctuations are added by the caller.
+        """
         s, cfg = self.slots, self.config
         idx = np.flatnonzero(s.active)
         pos, vel = s.pos[idx], s.vel[idx]
@@ -182,24 +190,23 @@ class CrowdSimulator:
         v_des = forces.desired_velocity(pos, s.goal[idx], s.speed[idx], cfg.social)
         e = forces.headings(vel, v_des)
         radius = s.radius[idx]
+        pos_all, rad_all, e_all = pos, radius, e
         if self.robot is not None and cfg.robot.visible:
-            r = self.robot
-            e_r, _ = forces.unit(r.vel[None])
+            e_r, _ = forces.unit(self.robot.vel[None])
             pos_all = np.concatenate([pos, self.world.robot_position()[None]])
-            rad_all, e_all = np.append(radius, r.radius_m), np.concatenate([e, e_r])
-        else:
-            pos_all, rad_all, e_all = pos, radius, e
+            rad_all, e_all = np.append(radius, self.robot.radius_m), np.concatenate([e, e_r])
         pos_all, rad_all, e_all = self._periodic_ghosts(pos_all, rad_all, e_all)
         i, j = neighbor_pairs(pos_all, cfg.social.cutoff_m)
-        sp = cfg.social
-        acc = pedestrian_acc_fast(pos_all, rad_all, e_all, i, j, sp.ped_strength_mps2, sp.ped_range_m,
-                                  sp.anisotropy)[: len(idx)]
+        labels = s.dense_labels(idx)
+        if not reference:
+            acc = kernels.social_acc(pos_all, rad_all, e_all, i, j, len(idx), vel, v_des, self.scenario.walls,
+                                     labels, self._params)
+            return acc, idx
+        acc = forces.pedestrian_acc(pos_all, rad_all, e_all, i, j, cfg.social)[: len(idx)]
         acc += forces.driving_acc(vel, v_des, cfg.social)
         acc += forces.wall_acc(pos, radius, self.scenario.walls, cfg.social)
         inner = (i < len(idx)) & (j < len(idx))
-        acc += forces.group_acc(pos, vel, e, s.dense_labels(idx), i[inner], j[inner], cfg.group_forces)
-        if cfg.social.fluctuation_mps2 > 0:
-            acc += self.rng.normal(0.0, cfg.social.fluctuation_mps2, acc.shape)
+        acc += forces.group_acc(pos, vel, e, labels, i[inner], j[inner], cfg.group_forces)
         return acc, idx
 
     def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray,
@@ -222,13 +229,15 @@ class CrowdSimulator:
         if not s.active.any():
             return
         acc, idx = self.accelerations()
+        if cfg.social.fluctuation_mps2 > 0:
+            acc += self.rng.normal(0.0, cfg.social.fluctuation_mps2, acc.shape)
         force = np.zeros_like(s.pos)
         force[idx] = acc * cfg.mass_kg
         s.vel[idx] = forces.cap_speed(s.vel[idx], s.speed[idx] * cfg.social.max_speed_factor)
         self.world.write(s.vel, force)
         for k in range(cfg.physics_substeps):
             if k:
-                self.world.write_force(force)
+                self.world.repeat_force()
             self.world.step(cfg.physics_dt_s)
 
     def _wrap_periodic(self) -> None:

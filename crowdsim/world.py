@@ -126,7 +126,9 @@ class PhysicsWorld:
         order = self._body_order()
         if len(order) == 0:
             return
-        packed = np.ascontiguousarray(np.concatenate([self._gather(vel), self._gather(force)], axis=1).ravel())
+        gathered = self._gather(force)
+        self._force_packed = np.ascontiguousarray(gathered.ravel())
+        packed = np.ascontiguousarray(np.concatenate([self._gather(vel), gathered], axis=1).ravel())
         self._packed = packed  # keep the memory alive while pymunk reads it
         self._buf_set.set_float_buf(packed)
         robot_vel = None if self._robot is None else self._robot.velocity
@@ -134,14 +136,11 @@ class PhysicsWorld:
         if robot_vel is not None:  # the batch write zeroed it with the other non-pedestrian bodies
             self._robot.velocity = robot_vel
 
-    def write_force(self, force: np.ndarray) -> None:
-        """Set only the force (C, 2) N; pymunk clears forces after every step."""
-        order = self._body_order()
-        if len(order) == 0:
+    def repeat_force(self) -> None:
+        """Apply the force of the last `write` again (pymunk clears forces after every sub-step)."""
+        if len(self._order) == 0:
             return
-        packed = np.ascontiguousarray(self._gather(force).ravel())
-        self._packed = packed
-        self._buf_set.set_float_buf(packed)
+        self._buf_set.set_float_buf(self._force_packed)
         batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._buf_set)
 
     def step(self, dt_s: float) -> None:

@@ -102,12 +102,17 @@ def test_speed_cap_only_touches_fast_rows():
     np.testing.assert_allclose(capped, [[0.6, 0.8], [0.3, 0.4]])
 
 
-def test_compiled_pair_kernel_matches_the_numpy_reference():
-    from crowdsim.neighbors import pedestrian_acc_fast
+def test_fused_kernel_matches_the_numpy_reference_with_groups_walls_and_robot():
+    from crowdsim.config import SimConfig
+    from crowdsim.sim import CrowdSimulator
 
-    pos, e, radius = _random_crowd(300, 5)
-    params = SocialForceParams()
-    i, j = neighbor_pairs(pos, params.cutoff_m)
-    fast = pedestrian_acc_fast(pos, radius, e, i, j, params.ped_strength_mps2, params.ped_range_m,
-                               params.anisotropy)
-    np.testing.assert_allclose(fast, forces.pedestrian_acc(pos, radius, e, i, j, params), rtol=1e-12, atol=1e-12)
+    sim = CrowdSimulator(SimConfig(scenario="plaza", n_pedestrians=60))
+    sim.reset(0)
+    for _ in range(5):
+        sim.step()
+    sim.set_robot(sim.slots.pos[np.flatnonzero(sim.slots.active)[0]] + [0.6, 0.0], [0.5, 0.2], 0.3)
+    fast, idx = sim.accelerations()
+    ref, idx_ref = sim.accelerations(reference=True)
+    np.testing.assert_array_equal(idx, idx_ref)
+    assert np.abs(ref).max() > 1.0  # a busy scene: walls, neighbours, groups and the robot all act
+    np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
