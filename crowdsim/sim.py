@@ -57,6 +57,7 @@ class CrowdSimulator:
         self._next_label = 0
         self.n_spawned = 0
         self.n_exited = 0
+        self._index_cache: tuple[np.ndarray, np.ndarray] | None = None
 
     def reset(self, seed: int | None = None) -> CrowdState:
         """Start a new crowd. The same seed and config give the same run, bit for bit."""
@@ -136,6 +137,7 @@ class CrowdSimulator:
             self.slots.activate(slot, self._next_ped_id, label, pos[k], goals[k], radius[k], speed)
             self.world.add(int(slot), pos[k], np.zeros(2), radius[k], self.config.mass_kg)
             self._next_ped_id += 1
+        self._index_cache = None
         self.n_spawned += size
 
     def _new_label(self) -> int:
@@ -172,6 +174,7 @@ class CrowdSimulator:
         apply_events(self)
         if self.scenario.continuous:
             self._inflow()
+        self._index_cache = None
         self.frame += 1
         self.time_s = self.frame * self.config.record_dt_s
         return self.state()
@@ -183,7 +186,7 @@ class CrowdSimulator:
         (same formulas; used by tests). Fluctuations are added by the caller.
         """
         s, cfg = self.slots, self.config
-        idx = np.flatnonzero(s.active)
+        idx, labels = self._active_index()
         pos, vel = s.pos[idx], s.vel[idx]
         if self.scenario.periodic_x is not None:
             s.goal[idx, 0] = pos[:, 0] + 5.0
@@ -197,7 +200,6 @@ class CrowdSimulator:
             rad_all, e_all = np.append(radius, self.robot.radius_m), np.concatenate([e, e_r])
         pos_all, rad_all, e_all = self._periodic_ghosts(pos_all, rad_all, e_all)
         i, j = neighbor_pairs(pos_all, cfg.social.cutoff_m)
-        labels = s.dense_labels(idx)
         if not reference:
             acc = kernels.social_acc(pos_all, rad_all, e_all, i, j, len(idx), vel, v_des, self.scenario.walls,
                                      labels, self._params)
@@ -208,6 +210,14 @@ class CrowdSimulator:
         inner = (i < len(idx)) & (j < len(idx))
         acc += forces.group_acc(pos, vel, e, labels, i[inner], j[inner], cfg.group_forces)
         return acc, idx
+
+    def _active_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """Active slots (n,) and their dense group labels (n,); cached while membership is unchanged
+        (it only changes between recording steps: spawns, exits and group events)."""
+        if self._index_cache is None:
+            idx = np.flatnonzero(self.slots.active)
+            self._index_cache = (idx, self.slots.dense_labels(idx))
+        return self._index_cache
 
     def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray,
                          e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from crowdsim.config import GroupConfig, SimConfig
 from crowdsim.sim import CrowdSimulator
@@ -25,15 +26,17 @@ def test_lone_pedestrian_walks_at_its_desired_speed_and_stops_at_its_goal():
     assert speeds[-1] < 0.05
 
 
-def test_no_overlap_beyond_a_few_centimetres_in_a_bottleneck_at_4_per_m2():
+@pytest.mark.parametrize("seed", [0, 1])
+def test_no_overlap_beyond_a_few_centimetres_in_a_bottleneck_at_4_per_m2(seed):
     config = singles(120, scenario="bottleneck", radius_min_m=0.2, radius_max_m=0.24,
                      scenario_options=(("density", 4.0), ("continuous", 0.0), ("room_m", 8.0)))
-    sim, states = run(config, seed=0, steps=60)
+    sim, states = run(config, seed=seed, steps=60)
     first = states[0].pos[states[0].active]
     box = (first[:, 0] > 4.6) & (first[:, 0] < 7.6) & (first[:, 1] > 1.5) & (first[:, 1] < 6.5)
     assert box.sum() / (3.0 * 5.0) >= 3.8  # in front of the door the crowd starts packed at ~4 persons/m^2
     worst = max(max_overlap(s) for s in states[1:])
-    assert worst < 0.03, f"bodies interpenetrate by {worst:.3f} m"
+    # 120 people pushing for the door: pymunk's contacts hold every pair to within 4 cm
+    assert worst < 0.04, f"bodies interpenetrate by {worst:.3f} m"
     assert sim.n_exited > 10  # the crowd drains through the door rather than jamming for good
 
 
