@@ -5,7 +5,7 @@ For a recording named `X` the writer produces, in one folder:
   advancing by 10 per 0.4 s step as in the benchmark files, positions in metres (4 decimals);
 - `X.groups.txt`: one line per group of two or more, member ped ids separated by spaces (the BIWI
   `groups.txt` format); a group lists every pedestrian that ever carried its label;
-- `X.labels.txt`: `frame<TAB>ped<TAB>group`, the ground-truth label of every row of `X.txt`, so that
+- `X.labels.tsv`: `frame<TAB>ped<TAB>group`, the ground-truth label of every row of `X.txt`, so that
   labels that change over time (leave and merge events) are exact per frame;
 - `X.json`: scenario, seed, steps and every parameter.
 Files are written atomically (temporary file, then rename), and identical inputs give identical bytes.
@@ -79,14 +79,14 @@ def groups_text(table: np.ndarray) -> str:
 
 
 def write_recording(folder: Path, name: str, log: TrajectoryLog, metadata: dict[str, Any]) -> dict[str, Path]:
-    """Write X.txt, X.groups.txt, X.labels.txt and X.json into folder; returns their paths."""
+    """Write X.txt, X.groups.txt, X.labels.tsv and X.json into folder; returns their paths."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     table = log.table()
     paths = {
         "trajectories": folder / f"{name}.txt",
         "groups": folder / f"{name}.groups.txt",
-        "labels": folder / f"{name}.labels.txt",
+        "labels": folder / f"{name}.labels.tsv",
         "metadata": folder / f"{name}.json",
     }
     _atomic_write(paths["trajectories"], trajectories_text(table))

@@ -127,3 +127,31 @@ def social_acc(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.ndarray
     return _all(np.ascontiguousarray(pos), radius, np.ascontiguousarray(e), i, j, n,
                 np.ascontiguousarray(vel), np.ascontiguousarray(v_des), np.ascontiguousarray(walls, dtype=float),
                 label, params)
+
+
+@numba.njit(cache=True)
+def _desired_and_heading(pos, vel, goal, speed, slowdown_m, min_speed):
+    n = pos.shape[0]
+    v_des = np.zeros((n, 2))
+    e = np.zeros((n, 2))
+    for k in range(n):
+        gx, gy = goal[k, 0] - pos[k, 0], goal[k, 1] - pos[k, 1]
+        dist = math.sqrt(gx * gx + gy * gy)
+        if dist > 1e-9:
+            s = speed[k] * min(max(dist / slowdown_m, 0.0), 1.0) / dist
+            v_des[k, 0], v_des[k, 1] = gx * s, gy * s
+        sp = math.sqrt(vel[k, 0] ** 2 + vel[k, 1] ** 2)
+        if sp > min_speed:
+            e[k, 0], e[k, 1] = vel[k, 0] / sp, vel[k, 1] / sp
+        else:
+            dn = math.sqrt(v_des[k, 0] ** 2 + v_des[k, 1] ** 2)
+            if dn > 1e-9:
+                e[k, 0], e[k, 1] = v_des[k, 0] / dn, v_des[k, 1] / dn
+    return v_des, e
+
+
+def desired_and_heading(pos: np.ndarray, vel: np.ndarray, goal: np.ndarray, speed: np.ndarray,
+                        slowdown_m: float, min_speed_mps: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled `forces.desired_velocity` and `forces.headings` in one call: (v_des, e), each (n, 2)."""
+    return _desired_and_heading(np.ascontiguousarray(pos), np.ascontiguousarray(vel), np.ascontiguousarray(goal),
+                                np.ascontiguousarray(speed), float(slowdown_m), float(min_speed_mps))

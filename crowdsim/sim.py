@@ -190,8 +190,11 @@ class CrowdSimulator:
         pos, vel = s.pos[idx], s.vel[idx]
         if self.scenario.periodic_x is not None:
             s.goal[idx, 0] = pos[:, 0] + 5.0
-        v_des = forces.desired_velocity(pos, s.goal[idx], s.speed[idx], cfg.social)
-        e = forces.headings(vel, v_des)
+        if reference:
+            v_des = forces.desired_velocity(pos, s.goal[idx], s.speed[idx], cfg.social)
+            e = forces.headings(vel, v_des)
+        else:
+            v_des, e = kernels.desired_and_heading(pos, vel, s.goal[idx], s.speed[idx], cfg.social.slowdown_radius_m)
         radius = s.radius[idx]
         pos_all, rad_all, e_all = pos, radius, e
         if self.robot is not None and cfg.robot.visible:

@@ -26,7 +26,7 @@ def test_same_seed_and_config_give_byte_identical_files(tmp_path):
         generate(EVENTFUL, RunSpec(duration_s=20.0, seed=7), tmp_path / k, name="run")
     generate(EVENTFUL, RunSpec(duration_s=20.0, seed=8), tmp_path / "c", name="run")
     a, b, c = (_files(tmp_path / k) for k in "abc")
-    assert set(a) == {"run.txt", "run.groups.txt", "run.labels.txt", "run.json"}
+    assert set(a) == {"run.txt", "run.groups.txt", "run.labels.tsv", "run.json"}
     assert a == b
     assert a["run.txt"] != c["run.txt"]
 

@@ -1,0 +1,21 @@
+"""Shared helpers for the planner tests (a plain module, imported by name)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner import PlanResult, step_robot
+
+
+def drive(planner, state, goal, prediction_fn, steps: int, obstacles=None):
+    """Closed loop: plan, apply the first control for dt, repeat. Returns states (steps+1, dim) and results.
+
+    ``prediction_fn(step, robot_state)`` gives the PedPrediction of a step (or None).
+    """
+    dt, model = planner.config.dt_s, planner.config.robot.model
+    states, results = [np.asarray(state, float)], []
+    for step in range(steps):
+        result: PlanResult = planner.plan(states[-1], goal, prediction_fn(step, states[-1]), obstacles)
+        results.append(result)
+        states.append(step_robot(states[-1], result.control, dt, model))
+    return np.array(states), results
