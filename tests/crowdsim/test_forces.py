@@ -116,3 +116,10 @@ def test_fused_kernel_matches_the_numpy_reference_with_groups_walls_and_robot():
     np.testing.assert_array_equal(idx, idx_ref)
     assert np.abs(ref).max() > 1.0  # a busy scene: walls, neighbours, groups and the robot all act
     np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
+
+
+def test_cell_grid_grows_its_buffer_for_very_dense_clusters():
+    pos = np.random.default_rng(9).uniform(0, 2.0, (300, 2))  # every pair is within the cut-off
+    i, j = neighbor_pairs(pos, 3.0)
+    assert len(i) == 300 * 299 // 2
+    assert set(zip(i, j, strict=True)) == set(zip(*brute_force_pairs(pos, 3.0), strict=True))
