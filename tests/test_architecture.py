@@ -27,7 +27,7 @@ def _sources(package: str) -> list[Path]:
 
 @pytest.mark.parametrize("package", CORE)
 def test_core_packages_never_import_each_other(package):
-    others = set(CORE + ("envs",)) - {package}
+    others = set((*CORE, "envs")) - {package}
     for path in _sources(package):
         assert not (_imports(path) & others), f"{path.relative_to(ROOT)} imports {_imports(path) & others}"
 
@@ -40,7 +40,7 @@ def test_core_packages_never_import_each_other(package):
 ])
 def test_heavy_dependencies_stay_in_their_place(module, allowed):
     home = {"torch": "predictor", "casadi": "planner"}.get(module)
-    for package in CORE + ("envs",):
+    for package in (*CORE, "envs"):
         for path in _sources(package):
             rel = path.relative_to(ROOT).as_posix()
             if module in _imports(path):
