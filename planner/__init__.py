@@ -1,1 +1,61 @@
-"""planner package."""
+"""Real-time CasADi MPC for a robot in a crowd, with group-aware soft constraints and baselines.
+
+Imports numpy and casadi only. Entry points:
+
+* :class:`MPCPlanner` ``(config).plan(robot_state, goal, prediction, obstacles) -> PlanResult``;
+* :class:`PedPrediction` (the prediction input), :func:`constant_velocity_prediction`,
+  :func:`frozen_prediction`;
+* :func:`robot_dynamics` (the ``casadi.Function`` the env steps the robot with) and :func:`step_robot`;
+* baselines via :func:`make_planner` (``mpc``, ``mpc_cv``, ``mpc_frozen``, ``social_force``).
+"""
+
+from planner.baselines import (
+    PLANNERS,
+    ConstantVelocityMPC,
+    FrozenMPC,
+    SocialForceParams,
+    SocialForcePlanner,
+    make_planner,
+)
+from planner.config import ROBOT_MODELS, SOLVERS, CostWeights, MPCConfig, RobotConfig
+from planner.dynamics import brake_control, clip_control, model_dims, robot_dynamics, rollout, step_robot
+from planner.mpc import MPCPlanner
+from planner.prediction import (
+    PedPrediction,
+    constant_velocity_prediction,
+    empty_prediction,
+    frozen_prediction,
+    validate_prediction,
+)
+from planner.result import PlanResult, PlanStats
+from planner.scene import polygon_to_segments, select_modes
+
+__all__ = [
+    "PLANNERS",
+    "ROBOT_MODELS",
+    "SOLVERS",
+    "ConstantVelocityMPC",
+    "CostWeights",
+    "FrozenMPC",
+    "MPCConfig",
+    "MPCPlanner",
+    "PedPrediction",
+    "PlanResult",
+    "PlanStats",
+    "RobotConfig",
+    "SocialForceParams",
+    "SocialForcePlanner",
+    "brake_control",
+    "clip_control",
+    "constant_velocity_prediction",
+    "empty_prediction",
+    "frozen_prediction",
+    "make_planner",
+    "model_dims",
+    "polygon_to_segments",
+    "robot_dynamics",
+    "rollout",
+    "select_modes",
+    "step_robot",
+    "validate_prediction",
+]

@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from planner import MPCConfig, MPCPlanner, brake_control, clip_control, frozen_prediction
+from planner import MPCConfig, MPCPlanner, PedPrediction, brake_control, clip_control, frozen_prediction
 
 GOAL = np.array([8.0, 0.0])
 
@@ -81,3 +81,24 @@ def test_stats_summary_reports_percentiles_and_fallback_rate():
     summary = planner.stats.summary()
     assert summary["calls"] == 3 and summary["fallback_rate"] == 0.0
     assert 0 < summary["p50_ms"] <= summary["p95_ms"] <= summary["max_ms"]
+
+
+def test_random_scenes_never_raise_and_respect_bounds():
+    rng = np.random.default_rng(7)
+    planner = MPCPlanner(MPCConfig(max_peds=4, max_groups=2, max_walls=3))
+    robot = planner.config.robot
+    for _ in range(25):
+        n = int(rng.integers(0, 9))
+        pose = np.r_[rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi)]
+        state = np.r_[pose, rng.uniform(0, 1.2), rng.uniform(-2, 2)]
+        positions = rng.uniform(-4, 4, (20, 12, n, 2))
+        mask = rng.random(n) < 0.8
+        positions[:, :, ~mask] = np.nan
+        pred = PedPrediction(positions, np.full(n, 0.3), rng.integers(0, 3, n), mask)
+        walls = rng.uniform(-5, 5, (int(rng.integers(0, 4)), 4))
+        result = planner.plan(state, rng.uniform(-6, 6, 2), pred, walls)
+        assert np.all(np.isfinite(result.control)) and np.all(np.isfinite(result.states))
+        assert -robot.min_speed_mps - 1e-6 <= result.control[0] <= robot.max_speed_mps + 1e-6
+        assert abs(result.control[1]) <= robot.max_yaw_rate_radps + 1e-6
+        assert abs(result.control[0] - state[3]) <= robot.max_accel_mps2 * planner.config.dt_s + 1e-6
+    assert planner.stats.counts["calls"] == 25

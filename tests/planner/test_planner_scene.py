@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from planner import MPCConfig, PedPrediction, constant_velocity_prediction, polygon_to_segments, select_modes
-from planner.scene import build_scene, farthest_point_samples, group_capsules, resample_in_time
+from planner.scene import (
+    build_scene,
+    farthest_point_samples,
+    group_capsules,
+    resample_in_time,
+    validate_obstacles,
+)
 
 
 def test_farthest_point_picks_medoid_then_extremes():
@@ -80,3 +86,14 @@ def test_invalid_predictions_raise_clear_errors(bad):
         positions[1, 5, 2, 0] = np.inf
     with pytest.raises(ValueError, match="invalid PedPrediction"):
         PedPrediction(positions, radii, gids, mask)
+
+
+def test_obstacles_accept_segments_or_polygons():
+    square = np.array([[3.0, -1.0], [5.0, -1.0], [5.0, 1.0], [3.0, 1.0]])
+    segs = validate_obstacles([square])
+    assert segs.shape == (4, 4) and np.allclose(segs[0], [3.0, -1.0, 5.0, -1.0])
+    assert validate_obstacles(None) is None and validate_obstacles([]).shape == (0, 4)
+    with pytest.raises(ValueError, match="segments"):
+        validate_obstacles(np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="NaN"):
+        validate_obstacles(np.array([[0.0, 0.0, np.nan, 1.0]]))

@@ -114,3 +114,14 @@ def test_gaussian_nll_matches_scipy() -> None:
     mu, cov = mean_cov(raw)
     expected = -multivariate_normal(mu.numpy(), cov.numpy()).logpdf(target.numpy())
     assert nll(raw, target).item() == pytest.approx(expected)
+
+
+def test_sgcn_training_and_inference_paths_agree() -> None:
+    from predictor.backbones.sgcn import AsymmetricConv
+
+    torch.manual_seed(0)
+    layer = AsymmetricConv(4)
+    x = torch.randn(3, 4, 7, 5)
+    with torch.no_grad():
+        conv = layer(x)
+    torch.testing.assert_close(layer(x), conv, atol=1e-5, rtol=1e-5)

@@ -1,0 +1,61 @@
+"""``predict`` latency of the inference API for N = 5, 20, 50 pedestrians and K = 20 samples.
+
+Usage: python bench/bench_predictor_predict.py [--threads 1] [--repeats 50]
+Models: GP-Graph-SGCN (the published hotel checkpoint when ../shared is present, else random weights),
+GP-Graph-STGCNN (random weights: latency does not depend on the values) and constant velocity.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from predictor import ConstantVelocityPredictor, GPGraph, GPGraphConfig, GPGraphPredictor, load_predictor
+
+REF = Path(__file__).resolve().parents[1] / ".." / "shared" / "reference" / "gpgraph_sgcn" / "hotel" / "val_best.pth"
+
+
+def history(n: int, rng: np.random.Generator) -> np.ndarray:
+    start = rng.uniform(-6, 6, size=(n, 2))
+    vel = rng.normal(scale=0.5, size=(n, 2))
+    return start[None] + vel[None] * np.arange(8)[:, None, None]
+
+
+def latency_ms(pred, n: int, repeats: int, rng: np.random.Generator) -> tuple[float, float]:
+    h = history(n, rng)
+    for _ in range(3):
+        pred.predict(h, n_samples=20, rng=rng)
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        pred.predict(h, n_samples=20, rng=rng)
+        times.append(time.perf_counter() - t)
+    return float(np.median(times) * 1e3), float(np.percentile(times, 95) * 1e3)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--repeats", type=int, default=50)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(0)
+    models = {
+        "GP-Graph-SGCN": load_predictor(REF) if REF.is_file() else GPGraphPredictor(GPGraph(GPGraphConfig())),
+        "GP-Graph-STGCNN": GPGraphPredictor(GPGraph(GPGraphConfig(backbone="stgcnn"))),
+        "constant velocity": ConstantVelocityPredictor(),
+    }
+    print(f"threads {args.threads}, K = 20, {args.repeats} calls each; median / p95 ms")
+    print(f"{'model':<20}" + "".join(f"{'N=' + str(n):>16}" for n in (5, 20, 50)))
+    rng = np.random.default_rng(0)
+    for name, pred in models.items():
+        cells = [latency_ms(pred, n, args.repeats, rng) for n in (5, 20, 50)]
+        print(f"{name:<20}" + "".join(f"{m:>9.2f} / {p:<5.1f}" for m, p in cells))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,107 @@
+"""Frozen, validated configuration for the robot model and the MPC.
+
+Units are in the field names: ``_m`` metres, ``_s`` seconds, ``_mps`` m/s, ``_mps2`` m/s²,
+``_radps`` rad/s, ``_radps2`` rad/s². Every default runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+ROBOT_MODELS = ("unicycle", "holonomic")
+SOLVERS = ("ipopt", "fatrop")
+
+
+def _check_name(kind: str, name: str, valid: tuple[str, ...]) -> None:
+    if name not in valid:
+        raise ValueError(f"unknown {kind} {name!r}; valid names: {', '.join(valid)}")
+
+
+def _check_positive(obj: object, names: tuple[str, ...]) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value > 0:
+            raise ValueError(f"{type(obj).__name__}.{name} must be > 0, got {value!r}")
+
+
+def _check_non_negative(obj: object, names: tuple[str, ...]) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value >= 0:
+            raise ValueError(f"{type(obj).__name__}.{name} must be >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Robot body and kinematic limits.
+
+    ``unicycle``: state (x, y, heading, v, omega), control (v, omega).
+    ``holonomic``: state (x, y, vx, vy), control (vx, vy); the speed bound is on the norm.
+    The velocity part of the state is the control applied during the previous step, so
+    acceleration bounds are local to a stage.
+    """
+
+    model: str = "unicycle"
+    radius_m: float = 0.3
+    max_speed_mps: float = 1.2  # unicycle forward speed / holonomic speed norm
+    min_speed_mps: float = 0.0  # unicycle only: most negative (reverse) speed is -min_speed_mps
+    max_accel_mps2: float = 1.5  # unicycle |dv/dt| / holonomic |dv/dt| norm
+    max_yaw_rate_radps: float = 2.0  # unicycle only
+    max_yaw_accel_radps2: float = 4.0  # unicycle only
+
+    def __post_init__(self) -> None:
+        _check_name("robot model", self.model, ROBOT_MODELS)
+        _check_positive(self, ("radius_m", "max_speed_mps", "max_accel_mps2", "max_yaw_rate_radps",
+                               "max_yaw_accel_radps2"))
+        _check_non_negative(self, ("min_speed_mps",))
+
+
+@dataclass(frozen=True)
+class CostWeights:
+    """Weights of the MPC cost terms (dimensionless multipliers of the terms documented in ``ocp``)."""
+
+    goal: float = 1.0  # per stage, on the pseudo-Huber distance to the goal (m)
+    goal_terminal: float = 5.0  # on the final stage's distance to the goal (m)
+    effort: float = 0.05  # on (control / control bound)²
+    smoothness: float = 0.5  # on (control change / acceleration bound per step)²
+    social: float = 0.5  # on exp(-d² / (2 comfort²)) per pedestrian and mode
+    slack_l1: float = 200.0  # on slack (m)
+    slack_l2: float = 2000.0  # on slack² (m²)
+
+    def __post_init__(self) -> None:
+        _check_non_negative(self, ("goal", "goal_terminal", "effort", "smoothness", "social",
+                                   "slack_l1", "slack_l2"))
+
+
+@dataclass(frozen=True)
+class MPCConfig:
+    """Sizes, timing and solver choice of the MPC. Sizes are fixed when the problem is built."""
+
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    weights: CostWeights = field(default_factory=CostWeights)
+    solver: str = "fatrop"
+    dt_s: float = 0.4  # plan (and control) step
+    horizon_steps: int = 10  # H; horizon = H * dt_s
+    max_peds: int = 8  # M: the nearest M valid pedestrians are constrained, the rest padded
+    n_modes: int = 3  # K: representative prediction samples per pedestrian
+    max_groups: int = 3  # group regions (groups of >= 2) constrained, nearest first
+    max_walls: int = 8  # obstacle segments constrained, nearest first
+    safety_margin_m: float = 0.1  # added to robot radius + pedestrian radius
+    check_midpoints: bool = False  # also check clearances half-way through each plan step (2x cost)
+    comfort_distance_m: float = 1.0  # length scale of the social-comfort cost
+    prediction_step_s: float = 0.4  # default step of incoming predictions
+    time_budget_s: float = 0.2  # wall-time budget of one solve; over it counts as a timeout
+    max_iter: int = 100
+    tolerance: float = 1e-4
+    max_slack_m: float = float("inf")  # reject a plan whose first step violates a clearance by more (m)
+    max_plan_reuse_steps: int = 3  # how many steps a previous plan may be replayed in fallback
+    verbose: bool = False
+
+    def __post_init__(self) -> None:
+        _check_name("solver", self.solver, SOLVERS)
+        _check_positive(self, ("dt_s", "horizon_steps", "max_peds", "n_modes", "comfort_distance_m",
+                               "prediction_step_s", "time_budget_s", "max_iter", "tolerance"))
+        _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
+                                   "max_plan_reuse_steps"))
+        if self.horizon_steps < 2:
+            raise ValueError(f"MPCConfig.horizon_steps must be >= 2, got {self.horizon_steps}")

@@ -1,0 +1,193 @@
+"""The MPC planner: builds the NLP once, solves it every step, and falls back safely on failure."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.config import MPCConfig
+from planner.dynamics import brake_control, clip_control, model_dims, step_numpy
+from planner.ocp import OCP, build_ocp, pack_params
+from planner.prediction import PedPrediction, empty_prediction, validate_prediction
+from planner.result import PlanResult, PlanStats
+from planner.scene import build_scene, validate_obstacles
+
+IPOPT_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+HEADING_OFFSETS_RAD = (0.0, -0.6, 0.6, -1.2, 1.2)  # first-guess directions relative to the goal
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """A stored plan starting at the current step: states (H+1, nz), controls (H, nu); age in steps."""
+
+    states: np.ndarray
+    controls: np.ndarray
+    age: int
+
+
+def check_state_goal(state: np.ndarray, goal: np.ndarray, state_dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return float64 copies of state (state_dim,) and goal (2,); raise ValueError on bad shape or values."""
+    state = np.array(state, dtype=float)
+    goal = np.array(goal, dtype=float)
+    if state.shape != (state_dim,):
+        raise ValueError(f"robot_state must have shape ({state_dim},), got {state.shape}")
+    if goal.shape != (2,):
+        raise ValueError(f"goal must have shape (2,), got {goal.shape}")
+    if not (np.all(np.isfinite(state)) and np.all(np.isfinite(goal))):
+        raise ValueError("robot_state and goal must be finite (no NaN or inf)")
+    return state, goal
+
+
+def check_inputs(state, goal, prediction, obstacles, state_dim: int):
+    """Validate every plan() input before any solver work; raise ValueError with a clear message."""
+    state, goal = check_state_goal(state, goal, state_dim)
+    if prediction is None:
+        prediction = empty_prediction()
+    elif not isinstance(prediction, PedPrediction):
+        raise ValueError(f"prediction must be a PedPrediction or None, got {type(prediction).__name__}")
+    else:
+        validate_prediction(prediction)
+    return state, goal, prediction, validate_obstacles(obstacles)
+
+
+class MPCPlanner:
+    """Receding-horizon planner. ``plan()`` validates its inputs (ValueError on bad input), then never
+    raises: solver failures, timeouts, NaN and infeasible results fall back to the previous plan
+    (shifted) or to braking, and every outcome is counted in ``stats``."""
+
+    def __init__(self, config: MPCConfig | None = None) -> None:
+        self.config = config or MPCConfig()
+        self.dims = model_dims(self.config.robot.model)
+        self.ocp: OCP = build_ocp(self.config)
+        self.stats = PlanStats()
+        self._plan: _Plan | None = None
+
+    def reset(self) -> None:
+        """Forget the stored plan (warm start and fallback); keep the stats."""
+        self._plan = None
+
+    def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
+             obstacles: np.ndarray | list | None = None) -> PlanResult:
+        """Plan from robot_state (state_dim,) to goal (2,) m among predicted pedestrians (absolute
+        positions, see :class:`PedPrediction`; None = nobody) and obstacles (segments (S, 4) m, or a list
+        of polygons (V, 2) m; None = none). Returns the first control and the plan (:class:`PlanResult`).
+        Raises ValueError on malformed or non-finite input, before any solver work; never otherwise."""
+        state, goal, prediction, obstacles = check_inputs(robot_state, goal, prediction, obstacles,
+                                                          self.dims.state_dim)
+        if self._plan is not None:
+            shifted = self._shift(self._plan)
+            self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
+        try:
+            result = self._solve(state, goal, prediction, obstacles)
+        except Exception as exc:  # never raise inside the control loop
+            result = self._fallback(state, "solver_error", f"{type(exc).__name__}: {exc}", 0.0, 0, np.inf)
+        self.stats.record(result)
+        return result
+
+    # -- solving -------------------------------------------------------------------------------
+    def _solve(self, state, goal, prediction, obstacles) -> PlanResult:
+        cfg, ocp = self.config, self.ocp
+        scene = build_scene(state[:2], prediction, obstacles, cfg)
+        if scene.start_penetration_m > 0.0:  # already overlapping someone: infeasible as posed
+            depth = scene.start_penetration_m
+            return self._fallback(state, "infeasible", "start in collision", 0.0, 0, depth)
+        p = pack_params(ocp.sizes, state, goal, scene)
+        w0 = self._initial_guess(state, goal, p)
+        start = time.perf_counter()
+        sol = ocp.solver(x0=w0, p=p, lbx=ocp.lbx, ubx=ocp.ubx, lbg=ocp.lbg, ubg=ocp.ubg)
+        elapsed = time.perf_counter() - start
+        stats = ocp.solver.stats()
+        w = sol["x"].full().ravel()
+        iters = int(stats.get("iter_count", 0))
+        solver_status = str(stats.get("return_status", stats.get("unified_return_status", "")))
+        finite = bool(np.all(np.isfinite(w)))
+        slack = ocp.slack_fn(w, p).full().reshape(ocp.layout.s.shape) if finite else np.full((1, 1), np.inf)
+        status = self._classify(stats, elapsed, finite, float(slack[:2].max(initial=0.0)))
+        max_slack = float(slack.max(initial=0.0))
+        if status != "solved":
+            return self._fallback(state, status, solver_status, elapsed, iters, max_slack)
+        states, controls = w[ocp.layout.z], w[ocp.layout.u]
+        self._plan = _Plan(states, controls, 0)
+        return PlanResult(controls[0].copy(), states, controls, "solved", solver_status, elapsed, iters,
+                          max_slack, None)
+
+    def _classify(self, stats: dict, elapsed: float, finite: bool, first_slack: float) -> str:
+        """Outcome of a solve; ``first_slack`` is the clearance violation (m) at the first planned step."""
+        ok = bool(stats.get("success", False)) or stats.get("return_status") in IPOPT_OK
+        if not finite:
+            return "nan"
+        if elapsed > self.config.time_budget_s:
+            return "timeout"
+        if not ok:
+            return "solver_failed"
+        if first_slack > self.config.max_slack_m:
+            return "infeasible"
+        return "solved"
+
+    def _initial_guess(self, state: np.ndarray, goal: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The cheapest of a few candidate guesses under the NLP's own cost: the shifted previous plan
+        (if any) and go-to-goal rollouts aimed straight and at +-HEADING_OFFSETS_RAD from the goal
+        direction (this breaks symmetric dead-locks such as a pedestrian right on the path). Slacks
+        are set to their minimal feasible values, which fatrop needs."""
+        layout = self.ocp.layout
+        states, controls = self._goal_rollouts(state, goal, np.array(HEADING_OFFSETS_RAD))
+        candidates = list(zip(states, controls, strict=True))
+        if self._plan is not None:
+            prev_states = self._plan.states.copy()
+            prev_states[0] = state
+            candidates.insert(0, (prev_states, self._plan.controls))
+        best, best_cost = None, np.inf
+        for cand_states, cand_controls in candidates:
+            w = np.zeros(layout.n)
+            w[layout.z], w[layout.u] = cand_states, cand_controls
+            w[layout.s] = self.ocp.slack_fn(w, p).full().reshape(layout.s.shape)
+            cost = float(self.ocp.cost_fn(w, p))
+            if cost < best_cost:
+                best, best_cost = w, cost
+        return best if best is not None else w
+
+    def _goal_rollouts(self, state: np.ndarray, goal: np.ndarray, offsets_rad: np.ndarray):
+        """States (C, H+1, nz) and controls (C, H, 2) of a bounded proportional controller heading to
+        the goal direction rotated by each of offsets_rad (C,)."""
+        cfg, rc = self.config, self.config.robot
+        x = np.tile(state, (len(offsets_rad), 1))
+        states, controls = [x], []
+        for _ in range(cfg.horizon_steps):
+            delta = goal - x[:, :2]
+            heading = np.arctan2(delta[:, 1], delta[:, 0]) + offsets_rad
+            if rc.model == "unicycle":
+                err = (heading - x[:, 2] + np.pi) % (2 * np.pi) - np.pi
+                want = np.stack([rc.max_speed_mps * np.maximum(np.cos(err), 0.0), 2.0 * err], axis=-1)
+            else:
+                speed = np.minimum(rc.max_speed_mps, np.linalg.norm(delta, axis=1) / cfg.dt_s)
+                want = speed[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+            u = clip_control(x, want, cfg.dt_s, rc)
+            x = step_numpy(x, u, cfg.dt_s, rc.model)
+            states.append(x)
+            controls.append(u)
+        return np.stack(states, axis=1), np.stack(controls, axis=1)
+
+    def _shift(self, plan: _Plan) -> _Plan:
+        """Advance a stored plan by one step: drop its first stage and repeat the last control."""
+        last = step_numpy(plan.states[-1], plan.controls[-1], self.config.dt_s, self.config.robot.model)
+        states = np.vstack([plan.states[1:], last])
+        controls = np.vstack([plan.controls[1:], plan.controls[-1:]])
+        return _Plan(states, controls, plan.age + 1)
+
+    # -- fallback ------------------------------------------------------------------------------
+    def _fallback(self, state, status, solver_status, elapsed, iters, max_slack) -> PlanResult:
+        """Replay the previous plan (shifted) while it is young enough, else brake; never raises."""
+        cfg = self.config
+        kind, wanted = ("brake", []) if self._plan is None else ("previous_plan", list(self._plan.controls))
+        controls, states = [], [state]
+        for k in range(cfg.horizon_steps):
+            x = states[-1]
+            u = clip_control(x, wanted[k], cfg.dt_s, cfg.robot) if k < len(wanted) else \
+                brake_control(x, cfg.dt_s, cfg.robot)
+            controls.append(u)
+            states.append(step_numpy(x, u, cfg.dt_s, cfg.robot.model))
+        controls = np.array(controls)
+        return PlanResult(controls[0].copy(), np.array(states), controls, status, solver_status, elapsed,
+                          iters, float(max_slack), kind)

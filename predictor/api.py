@@ -1,0 +1,144 @@
+"""Inference API: ``load_predictor(name_or_path).predict(history, n_samples=20, rng=None) -> Prediction``.
+
+Numpy in, numpy out (float64, metres, 0.4 s steps); torch stays inside.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from predictor.batch import relative
+from predictor.checkpoint import load_model
+from predictor.gaussian import mean_cov
+from predictor.model import GPGraph
+from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
+
+OBS_LEN, PRED_LEN = 8, 12
+CONSTANT_VELOCITY_NAMES = ("constant-velocity", "cv")
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Predicted futures for N pedestrians.
+
+    Attributes:
+        samples: (K, 12, N, 2) absolute positions at +0.4 ... +4.8 s, m.
+        mean: (12, N, 2) absolute means, m (last position plus the cumulative step means).
+        cov: (12, N, 2, 2) covariances of the absolute positions, m^2 (per-step covariances summed,
+            treating steps as independent).
+        group_id: (N,) the model's group assignment, 0..G-1.
+    """
+
+    samples: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    group_id: np.ndarray
+
+
+def check_history(history: np.ndarray) -> np.ndarray:
+    """Validate an (8, N, 2) finite history with N >= 1; returns it as float64."""
+    h = np.asarray(history, dtype=np.float64)
+    if h.ndim != 3 or h.shape[0] != OBS_LEN or h.shape[2] != 2:
+        raise ValueError(f"history must have shape (8, N, 2) in metres, got {h.shape}")
+    if h.shape[1] < 1:
+        raise ValueError("history has no pedestrians (N = 0)")
+    bad = ~np.isfinite(h)
+    if bad.any():
+        t, n, _ = np.argwhere(bad)[0]
+        raise ValueError(f"history contains NaN or inf (first at step {t}, pedestrian {n})")
+    return h
+
+
+def _check_samples(n_samples: int) -> None:
+    if not isinstance(n_samples, int | np.integer) or n_samples < 1:
+        raise ValueError(f"n_samples must be a positive integer, got {n_samples!r}")
+
+
+class GPGraphPredictor:
+    """Wraps a trained ``GPGraph``; latents follow ``spec`` (default: the model's sample level)."""
+
+    def __init__(self, model: GPGraph, spec: LatentSpec | None = None) -> None:
+        self.model = model.eval()
+        self.spec = spec or LatentSpec("normal", model.config.sample_level, per_step=True)
+
+    @torch.no_grad()
+    def predict(
+        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | None = None
+    ) -> Prediction:
+        """Sample ``n_samples`` futures from ``history`` (8, N, 2), m. Same rng state, same samples."""
+        h = check_history(history)
+        _check_samples(n_samples)
+        rng = rng if rng is not None else np.random.default_rng()
+        obs_abs = torch.as_tensor(h, dtype=torch.float32)[None]
+        obs_rel = torch.as_tensor(relative(h), dtype=torch.float32)[None]
+        out = self.model(obs_abs, obs_rel, torch.ones(1, h.shape[1], dtype=torch.bool))
+        mu, cov = (a[0].double().numpy() for a in mean_cov(out.raw))
+        groups = out.groups[0].numpy().astype(np.int64)
+        z = draw_latents(self.spec, n_samples, PRED_LEN, groups, rng)
+        samples = sample_positions(mu, cholesky_2x2(cov), z, h[-1])
+        return Prediction(samples, h[-1] + np.cumsum(mu, axis=0), np.cumsum(cov, axis=0), groups)
+
+
+@dataclass(frozen=True)
+class ConstantVelocityConfig:
+    """Constant-velocity baseline.
+
+    Attributes:
+        velocity_steps: observed steps averaged for the velocity estimate (1..7).
+        step_noise_m: per-step standard deviation of the velocity perturbation, m per 0.4 s step.
+    """
+
+    velocity_steps: int = 1
+    step_noise_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.velocity_steps < OBS_LEN:
+            raise ValueError(f"velocity_steps must be in 1..{OBS_LEN - 1}, got {self.velocity_steps}")
+        if self.step_noise_m < 0:
+            raise ValueError(f"step_noise_m must be >= 0, got {self.step_noise_m}")
+
+
+class ConstantVelocityPredictor:
+    """Extrapolates the last observed velocity; samples perturb the velocity with isotropic noise.
+
+    Every pedestrian is its own group.
+    """
+
+    def __init__(self, config: ConstantVelocityConfig | None = None) -> None:
+        self.config = config or ConstantVelocityConfig()
+
+    def predict(
+        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | None = None
+    ) -> Prediction:
+        h = check_history(history)
+        _check_samples(n_samples)
+        rng = rng if rng is not None else np.random.default_rng()
+        k = self.config.velocity_steps
+        vel = (h[-1] - h[-1 - k]) / k  # (N, 2), m/step
+        steps = np.arange(1, PRED_LEN + 1, dtype=np.float64)[:, None, None]
+        mean = h[-1] + steps * vel
+        sigma = self.config.step_noise_m
+        noise = rng.standard_normal((n_samples, 1, h.shape[1], 2)) * sigma
+        samples = mean[None] + steps[None] * noise
+        var = (steps[:, :, 0] * sigma) ** 2  # (12, 1)
+        cov = np.zeros((PRED_LEN, h.shape[1], 2, 2))
+        cov[..., 0, 0] = cov[..., 1, 1] = var
+        return Prediction(samples, mean, cov, np.arange(h.shape[1]))
+
+
+def load_predictor(
+    name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None
+) -> GPGraphPredictor | ConstantVelocityPredictor:
+    """A predictor by packaged name ('gpgraph-stgcnn-hotel', 'constant-velocity') or checkpoint path.
+
+    ``backbone``/``grouping`` apply to checkpoint files (a published reference file defaults to
+    backbone 'sgcn' with 'official' grouping).
+    """
+    if str(name_or_path) in CONSTANT_VELOCITY_NAMES:
+        return ConstantVelocityPredictor()
+    model, _ = load_model(name_or_path, backbone=backbone, grouping=grouping)
+    return GPGraphPredictor(model)

@@ -1,0 +1,24 @@
+"""Backbone registry: a new backbone is one module implementing ``predictor.backbones.base.Backbone``."""
+
+from __future__ import annotations
+
+from predictor.backbones.base import Backbone
+from predictor.backbones.sgcn import SGCN
+from predictor.backbones.stgcnn import STGCNN
+
+BACKBONES: dict[str, type[Backbone]] = {"sgcn": SGCN, "stgcnn": STGCNN}
+
+
+def check_backbone(name: str) -> None:
+    """Raise ValueError listing the valid names when ``name`` is not registered."""
+    if name not in BACKBONES:
+        raise ValueError(f"unknown backbone {name!r}; valid backbones: {sorted(BACKBONES)}")
+
+
+def make_backbone(name: str) -> Backbone:
+    """A fresh backbone by registry name."""
+    check_backbone(name)
+    return BACKBONES[name]()
+
+
+__all__ = ["BACKBONES", "Backbone", "check_backbone", "make_backbone"]

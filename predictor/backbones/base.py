@@ -1,0 +1,39 @@
+"""The small interface every backbone implements.
+
+A backbone maps node features (B, T_obs, N, C) of B padded windows, a node mask (B, N) and an optional
+edge mask (B, N, N) to raw bivariate Gaussian parameters (B, T_pred, N, 5) of each future per-step
+displacement: (mu_x, mu_y, log sigma_x, log sigma_y, rho before tanh), metres per step.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+
+def displacement_features(rel: Tensor, with_time: bool) -> Tensor:
+    """Node features from displacements ``rel`` (B, T, N, 2), m/step; optionally prepend t = 1..T."""
+    if not with_time:
+        return rel
+    b, t, n, _ = rel.shape
+    time = torch.arange(1, t + 1, dtype=rel.dtype, device=rel.device)
+    return torch.cat([time[None, :, None, None].expand(b, t, n, 1), rel], dim=-1)
+
+
+class Backbone(nn.Module):
+    """Base class: set ``in_features``, implement ``features`` and ``forward``."""
+
+    in_features: int = 2
+
+    def features(self, rel: Tensor) -> Tensor:
+        """Node features (B, T, N, in_features) from observed displacements ``rel`` (B, T, N, 2)."""
+        raise NotImplementedError
+
+    def forward(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None = None) -> Tensor:
+        """x (B, T, N, C), node_mask (B, N) bool, edge_mask (B, N, N) bool or None -> (B, 12, N, 5)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def reference_renames() -> list[tuple[str, str]]:
+        """Regex renames from a published checkpoint's names; empty when there is none."""
+        return []

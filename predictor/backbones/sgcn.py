@@ -1,0 +1,197 @@
+"""SGCN backbone (Shi et al., CVPR 2021): sparse graph attention with learned interaction masks.
+
+Batched over B padded windows. Input features (B, 8, N, 3) are (t, dx, dy) with t = 1..8 and (dx, dy) the
+per-step displacement in metres. Output (B, 12, N, 5): raw bivariate Gaussian parameters of the per-step
+displacement (mu_x, mu_y, log sigma_x, log sigma_y, rho before tanh).
+
+Padding is exact: attention keys of padded pedestrians are masked, and the asymmetric convolutions over
+the N x N interaction maps see zeros outside the real block after every layer, which is what the
+convolutions' own zero padding gives an unpadded window.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+from torch.nn import functional as F
+
+from predictor.backbones.base import Backbone, displacement_features
+from predictor.grouping import pair_mask
+
+
+class AsymmetricConv(nn.Module):
+    """PReLU(conv (3x1) + conv (1x3)) + identity, over (batch, channels, H, W)."""
+
+    def __init__(self, channels: int) -> None:
+        super().__init__()
+        self.conv_h = nn.Conv2d(channels, channels, (3, 1), padding=(1, 0), bias=False)
+        self.conv_w = nn.Conv2d(channels, channels, (1, 3), padding=(0, 1))
+        self.act = nn.PReLU()
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Training: both convolutions as one 5-tap contraction (its backward is several times faster than
+        that of two tiny CPU convolutions). Inference: the plain convolutions (faster forward)."""
+        if not torch.is_grad_enabled():
+            return self.act(self.conv_w(x) + self.conv_h(x)) + x
+        h, w = x.shape[-2:]
+        wh, ww = self.conv_h.weight[..., 0], self.conv_w.weight[:, :, 0]  # (out, in, 3)
+        taps = torch.stack([wh[..., 0], wh[..., 2], ww[..., 0], ww[..., 2], wh[..., 1] + ww[..., 1]], -1)
+        xp = F.pad(x, (1, 1, 1, 1))
+        shifted = torch.stack(
+            [xp[..., :h, 1 : w + 1], xp[..., 2:, 1 : w + 1], xp[..., 1 : h + 1, :w], xp[..., 1 : h + 1, 2:], x], 1
+        )
+        y = torch.einsum("oik,bkihw->bohw", taps, shifted) + self.conv_w.bias[:, None, None]
+        return self.act(y) + x
+
+
+class MultiHeadScores(nn.Module):
+    """Scaled dot-product attention scores (..., heads, L, L) over a length-L sequence of features."""
+
+    def __init__(self, in_dims: int, d_model: int = 64, heads: int = 4) -> None:
+        super().__init__()
+        self.embedding = nn.Linear(in_dims, d_model)
+        self.query = nn.Linear(d_model, d_model)
+        self.key = nn.Linear(d_model, d_model)
+        self.heads = heads
+        self.scale = math.sqrt(d_model)
+
+    def _split(self, x: Tensor) -> Tensor:
+        return x.reshape(*x.shape[:-1], self.heads, x.shape[-1] // self.heads).transpose(-3, -2)
+
+    def forward(self, x: Tensor, key_mask: Tensor | None = None) -> Tensor:
+        """x (..., L, in_dims); key_mask (..., L) bool -> softmax scores (..., heads, L, L)."""
+        emb = self.embedding(x)
+        scores = self._split(self.query(emb)) @ self._split(self.key(emb)).transpose(-1, -2) / self.scale
+        if key_mask is not None:
+            scores = scores.masked_fill(~key_mask[..., None, None, :], float("-inf"))
+        return torch.softmax(scores, dim=-1)
+
+
+def zero_softmax(x: Tensor, eps: float = 1e-5) -> Tensor:
+    """Row normalisation of (exp(x) - 1)^2 over the last axis: exact zeros stay zero."""
+    e = torch.pow(torch.exp(x) - 1.0, 2)
+    return e / (e.sum(dim=-1, keepdim=True) + eps)
+
+
+class GraphConv(nn.Module):
+    """PReLU(Linear(A @ X)), no bias."""
+
+    def __init__(self, in_dims: int, out_dims: int) -> None:
+        super().__init__()
+        self.linear = nn.Linear(in_dims, out_dims, bias=False)
+        self.act = nn.PReLU()
+
+    def forward(self, x: Tensor, adj: Tensor) -> Tensor:
+        return self.act(self.linear(adj @ x))
+
+
+class SGCN(Backbone):
+    """Sparse graph convolution network. Shapes in the class docstring of the module."""
+
+    in_features = 3
+
+    def __init__(
+        self,
+        obs_len: int = 8,
+        pred_len: int = 12,
+        d_model: int = 64,
+        heads: int = 4,
+        n_asym: int = 7,
+        n_tcn: int = 5,
+        mask_threshold: float = 0.5,
+    ) -> None:
+        super().__init__()
+        hid = d_model // heads
+        self.heads, self.mask_threshold = heads, mask_threshold
+        self.spatial_att = MultiHeadScores(2, d_model, heads)
+        self.temporal_att = MultiHeadScores(3, d_model, heads)
+        self.fusion_conv = nn.Conv2d(obs_len, obs_len, 1)
+        self.fusion_act = nn.PReLU()
+        self.spatial_asym = nn.ModuleList(AsymmetricConv(heads) for _ in range(n_asym))
+        self.temporal_asym = nn.ModuleList(AsymmetricConv(heads) for _ in range(n_asym))
+        self.gcn_st = nn.ModuleList([GraphConv(2, hid), GraphConv(hid, hid)])
+        self.gcn_ts = nn.ModuleList([GraphConv(2, hid), GraphConv(hid, hid)])
+        self.head_fusion = nn.Conv2d(heads, heads, 1, bias=False)
+        self.tcn_convs = nn.ModuleList(
+            nn.Conv2d(obs_len if k == 0 else pred_len, pred_len, 3, padding=1) for k in range(n_tcn)
+        )
+        self.tcn_acts = nn.ModuleList(nn.PReLU() for _ in range(n_tcn))
+        self.output = nn.Linear(hid, 5)
+
+    def features(self, rel: Tensor) -> Tensor:
+        return displacement_features(rel, with_time=True)
+
+    def _masks(self, s: Tensor, t: Tensor, valid: Tensor) -> tuple[Tensor, Tensor]:
+        """Sparse interaction masks from fused spatial scores s (B, T, H, N, N) and temporal t (B, N, H, T, T)."""
+        b, tt, h, n, _ = s.shape
+        v = valid[:, None, None].to(s.dtype)  # (B, 1, 1, N, N)
+        x = (s * v).reshape(b * tt, h, n, n)
+        vf = v.expand(b, tt, 1, n, n).reshape(b * tt, 1, n, n)
+        for layer in self.spatial_asym:
+            x = layer(x) * vf
+        y = t.reshape(-1, h, tt, tt)
+        for layer in self.temporal_asym:
+            y = layer(y)
+        x, y = torch.sigmoid(x), torch.sigmoid(y)
+        x = torch.where(x > self.mask_threshold, x, torch.zeros_like(x)).reshape(s.shape)
+        y = torch.where(y > self.mask_threshold, y, torch.zeros_like(y)).reshape(t.shape)
+        return x, y
+
+    def adjacency(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None) -> tuple[Tensor, Tensor]:
+        """Normalised sparse spatial (B, T, H, N, N) and temporal (B, N, H, T, T) adjacencies."""
+        b, t, n, _ = x.shape
+        valid = pair_mask(node_mask)
+        att_s = self.spatial_att(x[..., 1:], node_mask[:, None, :].expand(b, t, n))
+        att_s = att_s * valid[:, None, None].to(x.dtype)
+        att_t = self.temporal_att(x.transpose(1, 2))
+        f = att_s.transpose(1, 2).reshape(b * self.heads, t, n, n)
+        fused = (self.fusion_act(self.fusion_conv(f)) + f).reshape(b, self.heads, t, n, n).transpose(1, 2)
+        mask_s, mask_t = self._masks(fused, att_t, valid)
+        mask_s = mask_s + torch.eye(n, dtype=x.dtype, device=x.device)
+        mask_t = mask_t + torch.eye(t, dtype=x.dtype, device=x.device)
+        keep = valid if edge_mask is None else valid & edge_mask
+        mask_s = mask_s * keep[:, None, None].to(x.dtype)
+        return zero_softmax(att_s * mask_s), zero_softmax(att_t * mask_t)
+
+    def forward(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None = None) -> Tensor:
+        b, t, n, _ = x.shape
+        adj_s, adj_t = self.adjacency(x, node_mask, edge_mask)
+        pos = x[..., 1:]  # (B, T, N, 2)
+        st = self.gcn_st[0](pos[:, :, None], adj_s).permute(0, 3, 2, 1, 4)  # (B, N, H, T, d)
+        st = self.gcn_st[1](st, adj_t)
+        ts = self.gcn_ts[0](pos.transpose(1, 2)[:, :, None], adj_t).permute(0, 3, 2, 1, 4)  # (B, T, H, N, d)
+        ts = self.gcn_ts[1](ts, adj_s).permute(0, 3, 2, 1, 4)  # (B, N, H, T, d)
+        h, d = st.shape[2], st.shape[-1]
+        rep = self.head_fusion(st.reshape(b * n, h, t, d)) + ts.reshape(b * n, h, t, d)
+        feat = rep.transpose(1, 2)  # (B*N, T, H, d)
+        feat = self.tcn_acts[0](self.tcn_convs[0](feat))
+        for conv, act in zip(self.tcn_convs[1:], self.tcn_acts[1:], strict=True):
+            feat = act(conv(feat)) + feat
+        out = self.output(feat).mean(dim=-2)  # (B*N, 12, 5)
+        return out.reshape(b, n, -1, 5).transpose(1, 2)
+
+    @staticmethod
+    def reference_renames() -> list[tuple[str, str]]:
+        """(pattern, replacement) regexes from the authors' parameter names to this module's."""
+        return [
+            (r"^sparse_weighted_adjacency_matrices\.spatial_attention\.", "spatial_att."),
+            (r"^sparse_weighted_adjacency_matrices\.temporal_attention\.", "temporal_att."),
+            (r"^sparse_weighted_adjacency_matrices\.spa_fusion\.conv\.0\.", "fusion_conv."),
+            (r"^sparse_weighted_adjacency_matrices\.spa_fusion\.conv\.1\.", "fusion_act."),
+            (r"^sparse_weighted_adjacency_matrices\.interaction_mask\.spatial_asymmetric_convolutions\.",
+             "spatial_asym."),
+            (r"^sparse_weighted_adjacency_matrices\.interaction_mask\.temporal_asymmetric_convolutions\.",
+             "temporal_asym."),
+            (r"asym\.(\d+)\.conv1\.", r"asym.\1.conv_h."),
+            (r"asym\.(\d+)\.conv2\.", r"asym.\1.conv_w."),
+            (r"asym\.(\d+)\.activation\.", r"asym.\1.act."),
+            (r"^stsgcn\.spatial_temporal_sparse_gcn\.(\d+)\.embedding\.", r"gcn_st.\1.linear."),
+            (r"^stsgcn\.spatial_temporal_sparse_gcn\.(\d+)\.activation\.", r"gcn_st.\1.act."),
+            (r"^stsgcn\.temporal_spatial_sparse_gcn\.(\d+)\.embedding\.", r"gcn_ts.\1.linear."),
+            (r"^stsgcn\.temporal_spatial_sparse_gcn\.(\d+)\.activation\.", r"gcn_ts.\1.act."),
+            (r"^fusion_\.", "head_fusion."),
+            (r"^tcns\.(\d+)\.0\.", r"tcn_convs.\1."),
+            (r"^tcns\.(\d+)\.1\.", r"tcn_acts.\1."),
+        ]

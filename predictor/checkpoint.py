@@ -1,0 +1,166 @@
+"""Checkpoint files: this package's own format and the authors' published GP-Graph-SGCN state_dicts.
+
+Our format is a plain dict, loadable with ``torch.load(..., weights_only=True)``:
+``{"format": FORMAT, "config": GPGraphConfig.to_dict(), "state_dict": {...}, "meta": {...}}``.
+Nothing is ever unpickled without ``weights_only=True``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tempfile
+from pathlib import Path
+
+import torch
+from safetensors import SafetensorError, safe_open
+from safetensors.torch import save_file
+
+from predictor.backbones import BACKBONES
+from predictor.model import GPGraph, GPGraphConfig
+
+FORMAT = "predictor.gpgraph/1"
+PACKAGE_CHECKPOINTS = Path(__file__).parent / "checkpoints"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is unreadable, truncated, or does not fit the model."""
+
+
+def read_safetensors(path: Path) -> dict:
+    """A packaged ``.safetensors`` checkpoint as our dict format (config and meta in its metadata)."""
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            meta = f.metadata() or {}
+            state = {k: f.get_tensor(k) for k in f.keys()}
+        return {"format": meta["format"], "config": json.loads(meta["config"]), "state_dict": state,
+                "meta": json.loads(meta.get("meta", "{}"))}
+    except (SafetensorError, KeyError, ValueError, OSError) as exc:
+        raise CheckpointError(f"cannot read packaged checkpoint {path}: {exc}") from None
+
+
+def read_file(path: str | Path) -> dict:
+    """``torch.load`` with weights_only=True (or safetensors) and a clear error for corrupt files."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint not found: {path}")
+    if path.suffix == ".safetensors":
+        return read_safetensors(path)
+    try:
+        obj = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises several types for truncated or foreign files
+        raise CheckpointError(f"cannot read checkpoint {path} (truncated or not a torch file?): {exc}") from None
+    if not isinstance(obj, dict):
+        raise CheckpointError(f"checkpoint {path} holds a {type(obj).__name__}, expected a dict")
+    return obj
+
+
+def is_reference_state(state: dict) -> bool:
+    """Whether a state_dict uses the authors' GP-Graph parameter names."""
+    return any(k.startswith("baseline_model.") for k in state) and "group_gen.th" in state
+
+
+def convert_reference_state(state: dict, backbone: str = "sgcn") -> dict:
+    """Rename the authors' GP-Graph state_dict to this package's ``GPGraph`` names."""
+    renames = BACKBONES[backbone].reference_renames()
+    out = {}
+    for key, value in state.items():
+        if key.startswith("baseline_model."):
+            name = key[len("baseline_model.") :]
+            for pattern, repl in renames:
+                name = re.sub(pattern, repl, name)
+            out["backbones.0." + name] = value
+        elif key == "group_gen.th":
+            out["assigner.threshold"] = value
+        elif key.startswith("group_gen.group_cnn.0."):
+            out["assigner.embed." + key.rsplit(".", 1)[1]] = value
+        elif key == "group_mix.st_gcns_mix.0.weight":
+            out["integrator.act.weight"] = value
+        elif key.startswith("group_mix.st_gcns_mix.1."):
+            out["integrator.linear." + key.rsplit(".", 1)[1]] = value.reshape(value.shape[0], *value.shape[1:2])
+        else:
+            raise CheckpointError(f"unexpected parameter {key!r} in a reference checkpoint")
+    return out
+
+
+def load_state(model: GPGraph, state: dict, source: str) -> None:
+    """Load ``state`` strictly, turning mismatches into one readable CheckpointError."""
+    try:
+        model.load_state_dict(state, strict=True)
+    except RuntimeError as exc:
+        first = str(exc).splitlines()[:4]
+        raise CheckpointError(
+            f"checkpoint {source} does not fit a {model.config.backbone} GP-Graph "
+            f"(another architecture or config?): {' '.join(first)}"
+        ) from None
+
+
+def resolve(name_or_path: str | Path) -> Path:
+    """A file path as given, or a packaged checkpoint name such as 'gpgraph-stgcnn-hotel'."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    packaged = PACKAGE_CHECKPOINTS / f"{name_or_path}.safetensors"
+    if packaged.is_file():
+        return packaged
+    found = PACKAGE_CHECKPOINTS.glob("*.safetensors") if PACKAGE_CHECKPOINTS.is_dir() else []
+    names = sorted(p.stem for p in found)
+    raise CheckpointError(f"no checkpoint file or packaged name {str(name_or_path)!r}; packaged: {names}")
+
+
+def load_model(
+    name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None
+) -> tuple[GPGraph, dict]:
+    """Build a model from a checkpoint (ours or the authors'); returns (model in eval mode, meta).
+
+    ``backbone`` and ``grouping`` override the config; for a reference checkpoint, whose file holds no
+    config, the defaults are the published GP-Graph-SGCN with ``grouping`` ('official' to match its code).
+    """
+    path = resolve(name_or_path)
+    obj = read_file(path)
+    if is_reference_state(obj):
+        cfg = GPGraphConfig(backbone=backbone or "sgcn", grouping=grouping or "official")
+        state, meta = convert_reference_state(obj, cfg.backbone), {"reference": True}
+    elif obj.get("format") == FORMAT:
+        d = dict(obj["config"])
+        if grouping:
+            d["grouping"] = grouping
+        if backbone and backbone != d.get("backbone"):
+            raise CheckpointError(f"checkpoint {path} is a {d.get('backbone')} model, not {backbone}")
+        cfg, state, meta = GPGraphConfig.from_dict(d), obj["state_dict"], dict(obj.get("meta", {}))
+    else:
+        raise CheckpointError(f"{path} is neither a predictor checkpoint nor a reference GP-Graph state_dict")
+    model = GPGraph(cfg)
+    load_state(model, state, str(path))
+    return model.eval(), meta
+
+
+def save_atomic(obj: dict, path: str | Path) -> None:
+    """Write ``obj`` with torch.save to a temporary file in the same folder, then rename over ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        torch.save(obj, tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def save_model(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
+    """Save a model with its config inside (atomic)."""
+    save_atomic(
+        {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
+         "meta": meta or {}},
+        path,
+    )
+
+
+def export_packaged(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
+    """Write a model as ``.safetensors`` with its config and ``meta`` as JSON metadata (for shipping)."""
+    state = {k: v.detach().contiguous() for k, v in model.state_dict().items()}
+    metadata = {"format": FORMAT, "config": json.dumps(model.config.to_dict()), "meta": json.dumps(meta or {})}
+    save_file(state, str(path), metadata=metadata)

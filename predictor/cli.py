@@ -1,0 +1,164 @@
+"""``gpgraph`` command line: train, evaluate, predict.
+
+Examples::
+
+    gpgraph train --data ../shared/datasets/eth_ucy/hotel --backbone stgcnn --out runs/hotel --threads 2
+    gpgraph evaluate --checkpoint runs/hotel/best.pt --data ../shared/datasets/eth_ucy/hotel \
+        --protocol iid --seed 0 --json hotel.json
+    gpgraph evaluate --checkpoint ../shared/reference/gpgraph_sgcn/hotel/val_best.pth --backbone sgcn \
+        --grouping official --data ../shared/datasets/eth_ucy/hotel --protocol paper
+    gpgraph predict --checkpoint gpgraph-stgcnn-hotel --history hist.npy --out pred.npz
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from predictor.checkpoint import CheckpointError, load_model
+from predictor.data import DataFormatError
+from predictor.evaluate import EvalConfig, evaluate
+from predictor.model import GPGraphConfig
+from predictor.sampling import PROTOCOLS
+from predictor.train import TrainConfig, train
+from predictor.windows import load_windows
+
+METRIC_KEYS = ("ade", "fde", "col", "tcc", "pw_precision", "pw_recall", "gmitre_precision", "gmitre_recall")
+
+
+def split_folder(data: Path, split: str) -> Path:
+    """``data/split`` when it exists, else ``data`` itself (a folder of trajectory files)."""
+    sub = data / split
+    return sub if sub.is_dir() else data
+
+
+def _windows(data: Path, split: str) -> list:
+    folder = split_folder(data, split)
+    windows = load_windows(folder)
+    if not windows:
+        raise ValueError(f"no windows with >= 2 pedestrians present for 20 steps in {folder}")
+    return windows
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    model_cfg = GPGraphConfig.backbone_only(args.backbone) if args.no_groups else GPGraphConfig(
+        backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight)
+    cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
+                      seed=args.seed, model=model_cfg)
+    train_w = _windows(args.data, "train")[: args.max_windows or None]
+    val_w = _windows(args.data, "val")[: args.max_windows or None]
+    summary = train(cfg, train_w, val_w, args.out, resume=args.resume, progress=not args.quiet)
+    print(f"best validation loss {summary['best_val']:.4f}; {summary['seconds']:.1f} s; "
+          f"checkpoint {Path(args.out) / 'best.pt'}")
+    return 0
+
+
+def format_table(result: dict) -> str:
+    """A two-row text table of the metrics present in ``result``."""
+    keys = [k for k in METRIC_KEYS if k in result]
+    head = " ".join(f"{k:>16}" for k in keys)
+    row = " ".join(f"{result[k]:>16.4f}" for k in keys)
+    return f"protocol={result['protocol']} seed={result['seed']} trials={result['trials']}\n{head}\n{row}"
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping)
+    windows = _windows(args.data, "test")
+    cfg = EvalConfig(protocol=args.protocol, seed=args.seed, trials=args.trials, n_samples=args.samples,
+                     pool_size=args.pool_size)
+    result = evaluate(model, windows, cfg)
+    result["checkpoint"] = str(args.checkpoint)
+    result["grouping"] = model.config.grouping
+    print(format_table(result))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(result, indent=2) + "\n")
+    return 0
+
+
+def cmd_predict(args: argparse.Namespace) -> int:
+    from predictor.api import GPGraphPredictor
+
+    model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping)
+    if args.sample_level:
+        model.config = replace(model.config, sample_level=args.sample_level)
+    history = np.load(args.history)
+    pred = GPGraphPredictor(model).predict(history, n_samples=args.samples, rng=np.random.default_rng(args.seed))
+    np.savez(args.out, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
+    print(f"wrote {args.out}: samples {pred.samples.shape}, groups {pred.group_id.tolist()}")
+    return 0
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1)")
+    p.add_argument("--backbone", default=None, help="backbone name (sgcn, stgcnn)")
+    p.add_argument("--grouping", default=None, choices=["exact", "official", "ratio"])
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="gpgraph", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    t = sub.add_parser("train", help="train on DATA/train, select by DATA/val loss")
+    _common(t)
+    t.add_argument("--data", type=Path, required=True)
+    t.add_argument("--out", type=Path, required=True)
+    t.add_argument("--no-groups", action="store_true", help="the backbone alone (no GP-Graph branches)")
+    t.add_argument("--epochs", type=int, default=TrainConfig.epochs)
+    t.add_argument("--batch-size", type=int, default=TrainConfig.batch_size)
+    t.add_argument("--lr", type=float, default=TrainConfig.lr)
+    t.add_argument("--bce-weight", type=float, default=0.0, help="GP-Graph+S BCE weight (needs labels)")
+    t.add_argument("--rotate", action="store_true", help="random rotation augmentation")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--max-windows", type=int, default=0, help="use only the first N windows (smoke tests)")
+    t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(func=cmd_train)
+    e = sub.add_parser("evaluate", help="ADE/FDE/COL/TCC (+ PW/G-MITRE) on DATA/test")
+    _common(e)
+    e.add_argument("--checkpoint", required=True, help="checkpoint path or packaged name")
+    e.add_argument("--data", type=Path, required=True)
+    e.add_argument("--protocol", choices=PROTOCOLS, default="iid")
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--trials", type=int, default=EvalConfig.trials)
+    e.add_argument("--samples", type=int, default=EvalConfig.n_samples)
+    e.add_argument("--pool-size", type=int, default=EvalConfig.pool_size,
+                   help="KMeans latent sets precomputed for --protocol paper")
+    e.add_argument("--json", type=Path, default=None)
+    e.set_defaults(func=cmd_evaluate)
+    r = sub.add_parser("predict", help="sample futures for an (8, N, 2) history saved with numpy")
+    _common(r)
+    r.add_argument("--checkpoint", required=True)
+    r.add_argument("--history", type=Path, required=True, help=".npy file, shape (8, N, 2), metres")
+    r.add_argument("--out", type=Path, required=True, help=".npz output")
+    r.add_argument("--samples", type=int, default=20)
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
+    r.set_defaults(func=cmd_predict)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.threads < 1:
+        print("gpgraph: error: --threads must be >= 1", file=sys.stderr)
+        return 2
+    torch.set_num_threads(args.threads)
+    if args.command == "train" and args.backbone is None:
+        args.backbone = "stgcnn"
+    if args.command == "train" and args.grouping is None:
+        args.grouping = "exact"
+    try:
+        return args.func(args)
+    except (CheckpointError, DataFormatError, FileNotFoundError, ValueError) as exc:
+        print(f"gpgraph: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,143 @@
+"""Group assignment, straight-through estimator, pedestrian group pooling/unpooling and group masks.
+
+Batched layout: B windows padded to N pedestrians; ``node_mask`` (B, N) marks real pedestrians, which are
+always the first ones of each window. Group labels (B, N) are 0..G_b-1 for the real pedestrians of window
+b and G_b, G_b+1, ... for its padding, so every padded node is a group of its own.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.sparse import csgraph
+from torch import Tensor
+
+GROUPING_MODES = ("exact", "official", "ratio")
+
+
+def pair_mask(node_mask: Tensor) -> Tensor:
+    """(B, N, N) bool: both pedestrians real."""
+    return node_mask[:, :, None] & node_mask[:, None, :]
+
+
+def pairwise_distance(emb: Tensor) -> Tensor:
+    """D (B, N, N): mean over time of the L2 distance between embeddings ``emb`` (B, C, T, N)."""
+    e = emb.permute(0, 2, 3, 1)  # (B, T, N, C)
+    return torch.cdist(e, e, compute_mode="donot_use_mm_for_euclid_dist").mean(dim=1)
+
+
+def connected_components(adj: Tensor) -> Tensor:
+    """Exact connected components of symmetric bool graphs ``adj`` (B, N, N); labels (B, N) by first member."""
+    a = adj.detach().cpu().numpy()
+    out = np.empty(a.shape[:2], dtype=np.int64)
+    for i in range(a.shape[0]):
+        raw = csgraph.connected_components(a[i], directed=False)[1]
+        _, first = np.unique(raw, return_index=True)
+        rank = np.empty_like(first)
+        rank[np.argsort(first)] = np.arange(len(first))
+        out[i] = rank[raw]
+    return torch.from_numpy(out).to(adj.device)
+
+
+def official_relabel(adj: np.ndarray) -> np.ndarray:
+    """The reference code's order-dependent merging for one window, ``adj`` (n, n) bool of D <= pi.
+
+    Visits pairs (r, c) with r > c in row-major order; every pedestrian whose label equals r's label gets
+    the raw label c. Final labels are the raw values renumbered 0..G-1 in increasing order of raw value.
+    This can split chains, so it is not connected components.
+    """
+    n = adj.shape[0]
+    raw = np.arange(n)
+    for r, c in np.argwhere(np.tril(adj, k=-1)):
+        raw[raw == raw[r]] = c
+    return np.unique(raw, return_inverse=True)[1].reshape(-1)
+
+
+def _pad_labels(labels: list[np.ndarray], n: int) -> Tensor:
+    """Stack per-window labels (n_b,), padding window b with G_b, G_b+1, ...."""
+    out = np.zeros((len(labels), n), dtype=np.int64)
+    for i, lab in enumerate(labels):
+        g = int(lab.max()) + 1 if len(lab) else 0
+        out[i, : len(lab)] = lab
+        out[i, len(lab) :] = g + np.arange(n - len(lab))
+    return torch.from_numpy(out)
+
+
+def threshold_groups(dist: Tensor, pi: Tensor, node_mask: Tensor, mode: str = "exact") -> Tensor:
+    """Group labels (B, N) from pairs with D <= pi; ``mode`` 'exact' (components) or 'official'."""
+    adj = (dist <= pi) & pair_mask(node_mask)
+    if mode == "exact":
+        return connected_components(adj)
+    if mode == "official":
+        counts = node_mask.sum(dim=1).tolist()
+        adj_np = adj.cpu().numpy()
+        labels = [official_relabel(adj_np[i, :n, :n]) for i, n in enumerate(counts)]
+        return _pad_labels(labels, dist.shape[1]).to(dist.device)
+    raise ValueError(f"unknown grouping mode {mode!r}; valid: {GROUPING_MODES}")
+
+
+def ratio_groups(dist: Tensor, node_mask: Tensor, ratio: int) -> Tensor:
+    """Fixed-ratio grouping (ablation): merge the n - ceil(n / ratio) closest pairs of each window."""
+    adj = torch.zeros_like(dist, dtype=torch.bool)
+    for i, n in enumerate(node_mask.sum(dim=1).tolist()):
+        k = n - (n + ratio - 1) // ratio
+        if k <= 0:
+            continue
+        d = dist[i, :n, :n].detach()
+        rows, cols = torch.tril_indices(n, n, offset=-1, device=dist.device)
+        top = torch.topk(-d[rows, cols], k=k).indices
+        adj[i, rows[top], cols[top]] = True
+    adj = adj | adj.transpose(1, 2)
+    return connected_components(adj)
+
+
+def soft_assignment(dist: Tensor, pi: Tensor, tau: float, node_mask: Tensor) -> Tensor:
+    """A (B, N, N): column-normalised sigmoid(-(D - pi) / tau), zero on padded pairs."""
+    sig = torch.sigmoid(-(dist - pi) / tau) * pair_mask(node_mask)
+    return sig / sig.sum(dim=1, keepdim=True).clamp_min(1e-12)
+
+
+def straight_through(x: Tensor, assign: Tensor) -> Tensor:
+    """X' = stopgrad(X - X A) + X A for node features ``x`` (B, T, N, C): value X, gradient via X A."""
+    xa = torch.einsum("btic,bij->btjc", x, assign)
+    return (x - xa).detach() + xa
+
+
+def group_count(labels: Tensor, node_mask: Tensor) -> Tensor:
+    """Number of groups (B,) among real pedestrians."""
+    return torch.where(node_mask, labels + 1, torch.zeros_like(labels)).amax(dim=1)
+
+
+def pool(x: Tensor, labels: Tensor, node_mask: Tensor) -> tuple[Tensor, Tensor]:
+    """Mean-pool members into group nodes.
+
+    Args:
+        x: (B, T, N, C) node features.
+        labels: (B, N) group labels.
+        node_mask: (B, N) real pedestrians.
+    Returns:
+        (B, T, G, C) group features with G = max groups per window, and the (B, G) group-node mask.
+    """
+    b, t, n, c = x.shape
+    counts = group_count(labels, node_mask)
+    g = int(counts.max().item())
+    idx = labels.clamp_max(g - 1)
+    keep = node_mask.to(x.dtype)
+    sums = torch.zeros(b, t, g, c, dtype=x.dtype, device=x.device)
+    index = idx[:, None, :, None].expand(b, t, n, c)
+    sums = sums.scatter_add(2, index, x * keep[:, None, :, None])
+    num = torch.zeros(b, g, dtype=x.dtype, device=x.device).scatter_add(1, idx, keep)
+    gmask = torch.arange(g, device=x.device)[None, :] < counts[:, None]
+    return sums / num.clamp_min(1.0)[:, None, :, None], gmask
+
+
+def unpool(y: Tensor, labels: Tensor) -> Tensor:
+    """Copy group outputs ``y`` (B, T, G, C) back to every member: (B, T, N, C)."""
+    b, t, g, c = y.shape
+    idx = labels.clamp_max(g - 1)
+    return torch.gather(y, 2, idx[:, None, :, None].expand(b, t, idx.shape[1], c))
+
+
+def same_group_mask(labels: Tensor, node_mask: Tensor) -> Tensor:
+    """(B, N, N) bool: same group, both real (diagonal included for real pedestrians)."""
+    return (labels[:, :, None] == labels[:, None, :]) & pair_mask(node_mask)

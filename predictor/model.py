@@ -1,0 +1,206 @@
+"""GP-Graph (Bae, Park, Jeon, ECCV 2022): learned pedestrian groups around a weight-shared backbone.
+
+Three branches run one backbone: the pedestrian graph, the inter-group graph (members mean-pooled into
+one node per group, outputs copied back) and the intra-group graph (interactions masked to the same
+group). An integration module mixes the branch outputs into one bivariate Gaussian per pedestrian and
+future step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import NamedTuple
+
+import torch
+from torch import Tensor, nn
+
+from predictor import grouping
+from predictor.backbones import check_backbone, make_backbone
+
+INTEGRATIONS = ("mlp", "mean")
+Tuple3 = tuple[Tensor, Tensor, "Tensor | None"]
+SAMPLE_LEVELS = ("group", "scene", "pedestrian")
+
+
+@dataclass(frozen=True)
+class GPGraphConfig:
+    """GP-Graph model settings; the defaults are the published GP-Graph-SGCN.
+
+    Attributes:
+        backbone: registry name ('sgcn' or 'stgcnn').
+        grouping: 'exact' (connected components), 'official' (the reference code's relabelling) or
+            'ratio' (fixed-ratio grouping ablation).
+        group_ratio: pedestrians per group for 'ratio' grouping (>= 2).
+        threshold_init: initial learnable distance threshold pi, embedding units.
+        tau: temperature of the soft assignment sigmoid, embedding units.
+        embed_channels: channels of the group embedding F_phi.
+        pedestrian_branch, inter_branch, intra_branch: which branches run.
+        weight_share: one backbone for all branches (False: one per branch).
+        integration: 'mlp' (mean + residual PReLU/linear over the concatenation) or 'mean'.
+        bce_weight: weight of the GP-Graph+S pairwise BCE loss (0 disables it).
+        sample_level: default latent sharing at prediction: 'group', 'scene' or 'pedestrian'.
+    """
+
+    backbone: str = "sgcn"
+    grouping: str = "exact"
+    group_ratio: int = 2
+    threshold_init: float = 1.0
+    tau: float = 0.1
+    embed_channels: int = 8
+    pedestrian_branch: bool = True
+    inter_branch: bool = True
+    intra_branch: bool = True
+    weight_share: bool = True
+    integration: str = "mlp"
+    bce_weight: float = 0.0
+    sample_level: str = "group"
+
+    def __post_init__(self) -> None:
+        check_backbone(self.backbone)
+        if self.grouping not in grouping.GROUPING_MODES:
+            raise ValueError(f"grouping must be one of {grouping.GROUPING_MODES}, got {self.grouping!r}")
+        if self.integration not in INTEGRATIONS:
+            raise ValueError(f"integration must be one of {INTEGRATIONS}, got {self.integration!r}")
+        if self.sample_level not in SAMPLE_LEVELS:
+            raise ValueError(f"sample_level must be one of {SAMPLE_LEVELS}, got {self.sample_level!r}")
+        if not (self.pedestrian_branch or self.inter_branch or self.intra_branch):
+            raise ValueError("at least one branch must be on")
+        if self.tau <= 0 or self.group_ratio < 2 or self.embed_channels < 1 or self.bce_weight < 0:
+            raise ValueError("need tau > 0, group_ratio >= 2, embed_channels >= 1 and bce_weight >= 0")
+
+    @property
+    def branches(self) -> tuple[bool, bool, bool]:
+        return (self.pedestrian_branch, self.inter_branch, self.intra_branch)
+
+    @property
+    def uses_groups(self) -> bool:
+        return self.inter_branch or self.intra_branch
+
+    @classmethod
+    def backbone_only(cls, backbone: str) -> GPGraphConfig:
+        """The backbone alone: pedestrian branch only, no integration weights."""
+        return cls(backbone=backbone, inter_branch=False, intra_branch=False, integration="mean")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> GPGraphConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown GPGraphConfig fields {sorted(unknown)}")
+        return cls(**d)
+
+
+class Output(NamedTuple):
+    """Model output for B padded windows.
+
+    raw: (B, 12, N, 5) Gaussian parameters of each per-step displacement.
+    groups: (B, N) group labels. dist: (B, N, N) learned pair distance D. pi: threshold (scalar tensor).
+    """
+
+    raw: Tensor
+    groups: Tensor
+    dist: Tensor
+    pi: Tensor
+
+
+class GroupAssigner(nn.Module):
+    """F_phi (Conv2d 2 -> C, kernel (3, 1) over time) and the learnable threshold pi."""
+
+    def __init__(self, channels: int = 8, threshold_init: float = 1.0) -> None:
+        super().__init__()
+        self.embed = nn.Conv2d(2, channels, (3, 1), padding=(1, 0))
+        self.threshold = nn.Parameter(torch.tensor([threshold_init]))
+
+    def forward(self, obs_abs: Tensor) -> Tensor:
+        """Pair distance D (B, N, N) from absolute observed positions (B, T, N, 2), m."""
+        return grouping.pairwise_distance(self.embed(obs_abs.permute(0, 3, 1, 2)))
+
+
+class Integrator(nn.Module):
+    """Mean of the branch outputs plus a residual PReLU -> linear over their concatenation."""
+
+    def __init__(self, n_branches: int, pred_len: int = 12, out_dims: int = 5) -> None:
+        super().__init__()
+        self.act = nn.PReLU()
+        self.linear = nn.Linear(n_branches * out_dims * pred_len, out_dims * pred_len)
+
+    def forward(self, outs: list[Tensor]) -> Tensor:
+        """outs: branch outputs (B, 12, N, 5) in the order pedestrian, inter, intra -> (B, 12, N, 5)."""
+        mean = torch.stack(outs).mean(dim=0)
+        b, t, n, c = mean.shape
+        cat = torch.cat([o.permute(0, 3, 1, 2) for o in outs], dim=1)  # (B, branches*5, 12, N)
+        mix = self.linear(self.act(cat.reshape(b, -1, n).transpose(1, 2)))  # (B, N, 60)
+        return mean + mix.reshape(b, n, c, t).permute(0, 3, 1, 2)
+
+
+class GPGraph(nn.Module):
+    """GP-Graph around a registered backbone. ``forward`` takes padded batches; see ``Output``."""
+
+    def __init__(self, config: GPGraphConfig | None = None) -> None:
+        super().__init__()
+        self.config = config or GPGraphConfig()
+        n_branches = sum(self.config.branches)
+        n_backbones = 1 if self.config.weight_share else n_branches
+        self.backbones = nn.ModuleList(make_backbone(self.config.backbone) for _ in range(n_backbones))
+        self.assigner = GroupAssigner(self.config.embed_channels, self.config.threshold_init)
+        self.integrator = Integrator(n_branches) if self.config.integration == "mlp" else None
+
+    def assign(self, obs_abs: Tensor, node_mask: Tensor) -> tuple[Tensor, Tensor]:
+        """Pair distances D (B, N, N) and group labels (B, N)."""
+        dist = self.assigner(obs_abs)
+        pi = self.assigner.threshold
+        with torch.no_grad():
+            if not self.config.uses_groups:  # backbone alone: every pedestrian is its own group
+                labels = torch.arange(dist.shape[1], device=dist.device).expand(dist.shape[0], -1).clone()
+            elif self.config.grouping == "ratio":
+                labels = grouping.ratio_groups(dist, node_mask, self.config.group_ratio)
+            else:
+                labels = grouping.threshold_groups(dist, pi, node_mask, self.config.grouping)
+        return dist, labels
+
+    def _branches(self, x: Tensor, xg: Tensor, labels: Tensor, node_mask: Tensor) -> list[Tuple3]:
+        """(features, node mask, edge mask or None) per active branch: pedestrian, inter, intra."""
+        cfg = self.config
+        items: list[Tuple3] = []
+        if cfg.pedestrian_branch:
+            items.append((x, node_mask, None))
+        if cfg.inter_branch:
+            pooled, gmask = grouping.pool(xg, labels, node_mask)
+            items.append((pooled, gmask, None))
+        if cfg.intra_branch:
+            items.append((xg, node_mask, grouping.same_group_mask(labels, node_mask)))
+        return items
+
+    def _run_stacked(self, items: list[Tuple3]) -> list[Tensor]:
+        """One backbone call over all branches stacked along the batch (exact: padding is masked)."""
+        n = max(f.shape[2] for f, _, _ in items)
+        feats, masks, edges = [], [], []
+        for f, m, e in items:
+            pad = n - f.shape[2]
+            feats.append(nn.functional.pad(f, (0, 0, 0, pad)))
+            masks.append(nn.functional.pad(m, (0, pad)))
+            full = grouping.pair_mask(masks[-1]) if e is None else nn.functional.pad(e, (0, pad, 0, pad))
+            edges.append(full)
+        out = self.backbones[0](torch.cat(feats), torch.cat(masks), torch.cat(edges))
+        return [o[:, :, : f.shape[2]] for o, (f, _, _) in zip(out.chunk(len(items)), items, strict=True)]
+
+    def forward(self, obs_abs: Tensor, obs_rel: Tensor, node_mask: Tensor) -> Output:
+        """obs_abs, obs_rel: (B, 8, N, 2) positions (m) and displacements (m/step); node_mask (B, N)."""
+        cfg = self.config
+        x = self.backbones[0].features(obs_rel)
+        dist, labels = self.assign(obs_abs, node_mask)
+        pi = self.assigner.threshold
+        xg = grouping.straight_through(x, grouping.soft_assignment(dist, pi, cfg.tau, node_mask))
+        items = self._branches(x, xg, labels, node_mask)
+        if cfg.weight_share:
+            outs = self._run_stacked(items)
+        else:
+            outs = [bb(f, m, e) for bb, (f, m, e) in zip(self.backbones, items, strict=True)]
+        if cfg.inter_branch:
+            k = int(cfg.pedestrian_branch)
+            outs[k] = grouping.unpool(outs[k], labels)
+        raw = self.integrator(outs) if self.integrator is not None else torch.stack(outs).mean(dim=0)
+        return Output(raw, labels, dist, pi)
