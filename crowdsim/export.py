@@ -4,7 +4,8 @@ For a recording named `X` the writer produces, in one folder:
 - `X.txt`: `frame<TAB>ped<TAB>x<TAB>y`, one row per active pedestrian and recorded frame, frame ids
   advancing by 10 per 0.4 s step as in the benchmark files, positions in metres (4 decimals);
 - `X.groups.txt`: one line per group of two or more, member ped ids separated by spaces (the BIWI
-  `groups.txt` format); a group lists every pedestrian that ever carried its label;
+  `groups.txt` format); a partition: each pedestrian is in the group it belonged to for most of its
+  frames;
 - `X.labels.tsv`: `frame<TAB>ped<TAB>group`, the ground-truth label of every row of `X.txt`, so that
   labels that change over time (leave and merge events) are exact per frame;
 - `X.json`: scenario, seed, steps and every parameter.
@@ -66,15 +67,24 @@ def labels_text(table: np.ndarray) -> str:
     return "".join(f"{int(f)}\t{int(p)}\t{int(g)}\n" for f, p, _, _, g in table)
 
 
-def groups_text(table: np.ndarray) -> str:
-    """One line per label with two or more distinct pedestrians, ordered by label."""
-    lines = []
-    labels = table[:, 4].astype(np.int64)
+def majority_labels(table: np.ndarray) -> dict[int, int]:
+    """Each pedestrian's most frequent label over its rows (ties: the earliest label)."""
+    out: dict[int, int] = {}
     peds = table[:, 1].astype(np.int64)
-    for label in np.unique(labels):
-        members = np.unique(peds[labels == label])
-        if len(members) >= 2:
-            lines.append(" ".join(str(m) for m in members))
+    labels = table[:, 4].astype(np.int64)
+    for ped in np.unique(peds):
+        values, counts = np.unique(labels[peds == ped], return_counts=True)
+        out[int(ped)] = int(values[np.argmax(counts)])
+    return out
+
+
+def groups_text(table: np.ndarray) -> str:
+    """A partition in BIWI format: one line per group of two or more, each pedestrian in the group whose
+    label it carried for most of its frames (exact per-frame labels are in the labels file)."""
+    members: dict[int, list[int]] = {}
+    for ped, label in majority_labels(table).items():
+        members.setdefault(label, []).append(ped)
+    lines = [" ".join(str(p) for p in sorted(m)) for _, m in sorted(members.items()) if len(m) >= 2]
     return "\n".join(lines) + ("\n" if lines else "")
 
 

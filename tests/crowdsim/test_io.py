@@ -45,11 +45,14 @@ def test_eth_ucy_format_and_labels(tmp_path):
     assert meta["scenario"] == "plaza" and meta["seed"] == 3 and meta["steps"] == 100
     assert meta["config"]["groups"]["leave_rate_hz"] == 0.05
     assert meta["config"]["social"]["relaxation_time_s"] == 0.5
-    # the group file lists exactly the labels shared by two or more pedestrians
+    # the group file is a partition: each pedestrian in the group of its majority label
     groups = read_groups_file(paths["groups"])
-    by_label: dict[int, set[int]] = {}
-    for _, ped, g in labels.astype(int):
-        by_label.setdefault(g, set()).add(ped)
+    flat = [p for g in groups for p in g]
+    assert len(flat) == len(set(flat))
+    by_label: dict[int, list[int]] = {}
+    for ped in np.unique(labels[:, 1]).astype(int):
+        values, counts = np.unique(labels[labels[:, 1] == ped, 2].astype(int), return_counts=True)
+        by_label.setdefault(int(values[np.argmax(counts)]), []).append(int(ped))
     assert sorted(map(sorted, groups)) == sorted(sorted(m) for m in by_label.values() if len(m) >= 2)
 
 
