@@ -54,10 +54,10 @@ def pair_terms(diff: np.ndarray, r_sum: np.ndarray, e_i: np.ndarray, e_j: np.nda
 
 
 def scatter_add(n: int, idx: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Sum rows of values (P, 2) into an (n, 2) array at indices idx (P,)."""
-    out = np.empty((n, 2))
-    out[:, 0] = np.bincount(idx, weights=values[:, 0], minlength=n)
-    out[:, 1] = np.bincount(idx, weights=values[:, 1], minlength=n)
+    """Sum rows of values (P, k) into an (n, k) array at indices idx (P,)."""
+    out = np.empty((n, values.shape[1]))
+    for k in range(values.shape[1]):
+        out[:, k] = np.bincount(idx, weights=values[:, k], minlength=n)
     return out
 
 
@@ -90,13 +90,6 @@ def wall_acc(pos: np.ndarray, radius: np.ndarray, segments: np.ndarray,
     return np.einsum("ns,nsk->nk", mag, n)
 
 
-def _group_sums(label: np.ndarray, values: np.ndarray, n_groups: int) -> np.ndarray:
-    out = np.empty((n_groups, values.shape[1]))
-    for k in range(values.shape[1]):
-        out[:, k] = np.bincount(label, weights=values[:, k], minlength=n_groups)
-    return out
-
-
 def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray, i: np.ndarray,
               j: np.ndarray, params: GroupForceParams) -> np.ndarray:
     """(N, 2) Moussaïd et al. (2010) group terms: gaze, coherence and intra-group repulsion.
@@ -108,7 +101,7 @@ def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray
     n_groups = int(label.max()) + 1 if n else 0
     size = np.bincount(label, minlength=n_groups)[label].astype(float)
     in_group = size > 1
-    centre = _group_sums(label, pos, n_groups)[label] / size[:, None]
+    centre = scatter_add(n_groups, label, pos)[label] / size[:, None]
     # Gaze: rotate the head towards the other members' centre; beyond the vision field, slow down.
     others = (centre * size[:, None] - pos) / np.maximum(size - 1.0, 1.0)[:, None]
     to_others, _ = unit(others - pos)

@@ -73,9 +73,8 @@ class CrowdSimulator:
 
     def _spawn_initial(self) -> None:
         cfg = self.config
-        progress_max = 0.0 if self.scenario.on_arrival != "remove" or self.scenario.periodic_x else 0.8
-        if self.scenario.periodic_x is not None:
-            progress_max = 0.0
+        # groups of exit scenarios start part-way along their route; others start at their origin
+        progress_max = 0.8 if self.scenario.on_arrival == "remove" and self.scenario.periodic_x is None else 0.0
         for size in draw_group_sizes(self.rng, cfg.n_pedestrians, cfg.groups):
             if not self._try_spawn_group(size, progress_max, tries=200):
                 raise RuntimeError(
