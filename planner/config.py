@@ -85,23 +85,28 @@ class MPCConfig:
     max_peds: int = 8  # M: the nearest M valid pedestrians are constrained, the rest padded
     n_modes: int = 3  # K: representative prediction samples per pedestrian
     max_groups: int = 3  # group regions (groups of >= 2) constrained, nearest first
+    max_group_span_m: float = 3.0  # a group predicted to spread wider than this is not treated as one region
     max_walls: int = 8  # obstacle segments constrained, nearest first
     safety_margin_m: float = 0.1  # added to robot radius + pedestrian radius
     check_midpoints: bool = False  # also check clearances half-way through each plan step (2x cost)
     comfort_distance_m: float = 1.0  # length scale of the social-comfort cost
-    prediction_step_s: float = 0.4  # default step of incoming predictions
     time_budget_s: float = 0.2  # wall-time budget of one solve; over it counts as a timeout
-    max_iter: int = 100
-    tolerance: float = 1e-4
-    max_slack_m: float = float("inf")  # reject a plan whose first step violates a clearance by more (m)
+    max_iter: int = 100  # solver iterations
+    tolerance: float = 1e-4  # solver convergence tolerance
+    # Reject (fall back from) a plan whose first step violates a clearance by more than this, m;
+    # inf (default) trusts the soft constraints. Starts in collision are always rejected.
+    max_slack_m: float = float("inf")
     max_plan_reuse_steps: int = 3  # how many steps a previous plan may be replayed in fallback
     verbose: bool = False
 
     def __post_init__(self) -> None:
         _check_name("solver", self.solver, SOLVERS)
         _check_positive(self, ("dt_s", "horizon_steps", "max_peds", "n_modes", "comfort_distance_m",
-                               "prediction_step_s", "time_budget_s", "max_iter", "tolerance"))
+                               "max_group_span_m", "time_budget_s", "max_iter", "tolerance"))
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         if self.horizon_steps < 2:
             raise ValueError(f"MPCConfig.horizon_steps must be >= 2, got {self.horizon_steps}")
+        if self.dt_s * self.robot.max_yaw_rate_radps > 2.0:
+            raise ValueError("MPCConfig.dt_s * robot.max_yaw_rate_radps must be <= 2 rad (accuracy of the "
+                             f"discrete unicycle), got {self.dt_s * self.robot.max_yaw_rate_radps:.2f}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -52,6 +53,13 @@ def check_inputs(state, goal, prediction, obstacles, state_dim: int):
     return state, goal, prediction, validate_obstacles(obstacles)
 
 
+@lru_cache(maxsize=32)
+def shared_ocp(config: MPCConfig) -> OCP:
+    """The NLP for ``config``, built once per process and shared by planners with an equal config
+    (an OCP is immutable; each planner keeps its own warm start, fallback plan and stats)."""
+    return build_ocp(config)
+
+
 class MPCPlanner:
     """Receding-horizon planner. ``plan()`` validates its inputs (ValueError on bad input), then never
     raises: solver failures, timeouts, NaN and infeasible results fall back to the previous plan
@@ -60,7 +68,7 @@ class MPCPlanner:
     def __init__(self, config: MPCConfig | None = None) -> None:
         self.config = config or MPCConfig()
         self.dims = model_dims(self.config.robot.model)
-        self.ocp: OCP = build_ocp(self.config)
+        self.ocp: OCP = shared_ocp(self.config)
         self.stats = PlanStats()
         self._plan: _Plan | None = None
 

@@ -17,7 +17,8 @@ Steps, all numpy:
 4. **Group regions** (:func:`group_capsules`): per stage and mode, each group of >= 2 real members
    becomes a capsule: a segment along the members' principal axis spanning their projections,
    with radius = largest perpendicular offset + largest member radius. It contains every member's
-   disc; the robot keeps (capsule radius + robot radius + margin) from the segment.
+   disc; the robot keeps (capsule radius + robot radius + margin) from the segment. A capsule longer
+   than ``max_group_span_m`` (members predicted to drift apart) is dropped for that time and mode.
 """
 
 from __future__ import annotations
@@ -168,7 +169,9 @@ def _group_arrays(stage_pos: np.ndarray, radii: np.ndarray, groups: list[np.ndar
         pts = np.transpose(stage_pos[:, :, members], (1, 0, 2, 3))  # (H, K, n, 2)
         a, b, rad = group_capsules(pts, radii[members])
         grp_a[:, slot], grp_b[:, slot] = a, b
-        grp_clear[:, slot] = rad + cfg.robot.radius_m + cfg.safety_margin_m
+        clear = rad + cfg.robot.radius_m + cfg.safety_margin_m
+        too_wide = np.linalg.norm(b - a, axis=-1) > cfg.max_group_span_m
+        grp_clear[:, slot] = np.where(too_wide, -FAR_M, clear)  # -FAR_M: constraint always satisfied
         grp_mask[slot] = 1.0
     return grp_a, grp_b, grp_clear, grp_mask
 

@@ -50,6 +50,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     model_cfg = GPGraphConfig.backbone_only(args.backbone) if args.no_groups else GPGraphConfig(
         backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight)
     cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
+                      bucket=args.bucket, max_pairs=args.max_pairs,
                       seed=args.seed, model=model_cfg)
     train_w = _windows(args.data, "train")[: args.max_windows or None]
     val_w = _windows(args.data, "val")[: args.max_windows or None]
@@ -112,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--epochs", type=int, default=TrainConfig.epochs)
     t.add_argument("--batch-size", type=int, default=TrainConfig.batch_size)
     t.add_argument("--lr", type=float, default=TrainConfig.lr)
+    t.add_argument("--bucket", type=int, default=TrainConfig.bucket, help="size-sorting chunk, in batches")
+    t.add_argument("--max-pairs", type=int, default=TrainConfig.max_pairs,
+                   help="micro-batch budget B * N_max^2 (0: one forward pass per batch)")
     t.add_argument("--bce-weight", type=float, default=0.0, help="GP-Graph+S BCE weight (needs labels)")
     t.add_argument("--rotate", action="store_true", help="random rotation augmentation")
     t.add_argument("--seed", type=int, default=0)

@@ -40,6 +40,8 @@ class TrainConfig:
         rotate: random rotation augmentation of training windows.
         bucket: batches drawn from chunks of ``bucket * batch_size`` shuffled windows sorted by size
             (less padding); 1 disables sorting.
+        max_pairs: split each optimiser batch into size-sorted micro-batches of at most this many
+            padded pair slots (B * N_max^2), accumulating gradients; 0 disables splitting.
         seed: seeds the numpy Generator (shuffling, rotations) and the initial weights.
     """
 
@@ -52,12 +54,13 @@ class TrainConfig:
     clip_grad: float = 10.0
     rotate: bool = False
     bucket: int = 8
+    max_pairs: int = 0
     seed: int = 0
     model: GPGraphConfig = field(default_factory=GPGraphConfig)
 
     def __post_init__(self) -> None:
-        if self.epochs < 1 or self.batch_size < 1 or self.bucket < 1:
-            raise ValueError("epochs, batch_size and bucket must be >= 1")
+        if self.epochs < 1 or self.batch_size < 1 or self.bucket < 1 or self.max_pairs < 0:
+            raise ValueError("epochs, batch_size and bucket must be >= 1 and max_pairs >= 0")
         if self.lr <= 0 or self.weight_decay < 0 or self.clip_grad <= 0 or not 0 < self.gamma <= 1:
             raise ValueError("need lr > 0, weight_decay >= 0, clip_grad > 0 and 0 < gamma <= 1")
 
@@ -67,16 +70,40 @@ class TrainConfig:
         return d
 
 
-def make_batches(windows: list[Window], batch_size: int, bucket: int, rng: np.random.Generator) -> list[Batch]:
-    """Shuffle, sort within buckets by pedestrian count, cut into batches, shuffle the batch order."""
+def split_by_size(windows: list[Window], max_pairs: int) -> list[list[Window]]:
+    """Sort by pedestrian count and cut into micro-batches whose padded size B * N_max^2 <= ``max_pairs``.
+
+    Each micro-batch holds at least one window; ``max_pairs`` 0 keeps everything in one batch.
+    """
+    if max_pairs <= 0:
+        return [windows]
+    out: list[list[Window]] = []
+    for w in sorted(windows, key=lambda w: w.n_peds):
+        if out and (len(out[-1]) + 1) * w.n_peds**2 <= max_pairs:
+            out[-1].append(w)
+        else:
+            out.append([w])
+    return out
+
+
+def make_batches(
+    windows: list[Window], batch_size: int, bucket: int, rng: np.random.Generator, max_pairs: int = 0
+) -> list[list[Batch]]:
+    """Optimiser steps, each a list of padded micro-batches.
+
+    Shuffle, sort within chunks of ``bucket * batch_size`` windows by pedestrian count (``bucket`` 1: no
+    sorting), cut into ``batch_size`` steps, shuffle the step order, then split each step by size.
+    """
     order = rng.permutation(len(windows))
     chunk = batch_size * bucket
     groups: list[list[int]] = []
     for s in range(0, len(order), chunk):
-        part = sorted(order[s : s + chunk].tolist(), key=lambda i: windows[i].n_peds) if bucket > 1 else \
-            order[s : s + chunk].tolist()
+        part = order[s : s + chunk].tolist()
+        if bucket > 1:
+            part = sorted(part, key=lambda i: windows[i].n_peds)
         groups += [part[j : j + batch_size] for j in range(0, len(part), batch_size)]
-    return [collate([windows[i] for i in groups[j]]) for j in rng.permutation(len(groups))]
+    steps = [[windows[i] for i in groups[j]] for j in rng.permutation(len(groups))]
+    return [[collate(m) for m in split_by_size(step, max_pairs)] for step in steps]
 
 
 def group_bce(dist: Tensor, pi: Tensor, tau: float, batch: Batch) -> Tensor:
@@ -114,18 +141,24 @@ def _optimiser(model: GPGraph, cfg: TrainConfig) -> tuple[torch.optim.Optimizer,
     return opt, sched
 
 
-def train_epoch(model: GPGraph, batches: list[Batch], opt: torch.optim.Optimizer, clip: float) -> float:
-    """One pass; returns the window-weighted mean training loss."""
+def train_epoch(model: GPGraph, steps: list[list[Batch]], opt: torch.optim.Optimizer, clip: float) -> float:
+    """One pass over optimiser steps (micro-batches accumulate, weighted by their window count).
+
+    Returns the window-weighted mean training loss.
+    """
     model.train()
     total, count = 0.0, 0
-    for b in batches:
+    for micro in steps:
         opt.zero_grad(set_to_none=True)
-        loss = batch_loss(model, b)
-        loss.backward()
+        n_step = sum(b.node_mask.shape[0] for b in micro)
+        for b in micro:
+            n = b.node_mask.shape[0]
+            loss = batch_loss(model, b)
+            (loss * (n / n_step)).backward()
+            total += loss.item() * n
+        count += n_step
         torch.nn.utils.clip_grad_norm_(model.parameters(), clip)
         opt.step()
-        total += loss.item() * b.node_mask.shape[0]
-        count += b.node_mask.shape[0]
     return total / count
 
 
@@ -164,7 +197,8 @@ def train(
     for epoch in bar:
         tic = time.perf_counter()
         windows = augment_rotations(train_windows, rng) if cfg.rotate else train_windows
-        tr = train_epoch(model, make_batches(windows, cfg.batch_size, cfg.bucket, rng), opt, cfg.clip_grad)
+        steps = make_batches(windows, cfg.batch_size, cfg.bucket, rng, cfg.max_pairs)
+        tr = train_epoch(model, steps, opt, cfg.clip_grad)
         va = validation_loss(model, val_batches)
         lr = opt.param_groups[0]["lr"]
         sched.step()

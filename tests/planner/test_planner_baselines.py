@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from planner_helpers import drive
+from planner_helpers import drive, make_config
 
-from planner import PLANNERS, MPCConfig, PedPrediction, constant_velocity_prediction, make_planner
+from planner import PLANNERS, PedPrediction, constant_velocity_prediction, make_planner
 
 GOAL = np.array([8.0, 0.0])
 
@@ -21,7 +21,7 @@ def _crossing_walker(step: int, dt: float) -> PedPrediction:
 
 @pytest.mark.parametrize("name", sorted(PLANNERS))
 def test_every_baseline_reaches_goal_in_empty_space(name):
-    planner = make_planner(name, MPCConfig())
+    planner = make_planner(name, make_config())
     states, results = drive(planner, np.zeros(5), GOAL, lambda *_: None, 35)
     assert np.linalg.norm(states[-1, :2] - GOAL) < 0.5
     assert all(r.control.shape == (2,) for r in results)
@@ -30,7 +30,7 @@ def test_every_baseline_reaches_goal_in_empty_space(name):
 
 @pytest.mark.parametrize("name", ["mpc_cv", "mpc", "social_force"])
 def test_baselines_avoid_a_crossing_walker(name):
-    planner = make_planner(name)
+    planner = make_planner(name, make_config())
     dt = planner.config.dt_s
     states, _ = drive(planner, np.zeros(5), GOAL, lambda step, _: _crossing_walker(step, dt), 35)
     walker = np.stack([[4.0, -3.0 + 0.8 * step * dt] for step in range(36)])
@@ -40,7 +40,7 @@ def test_baselines_avoid_a_crossing_walker(name):
 
 
 def test_frozen_mpc_uses_current_positions_only():
-    planner = make_planner("mpc_frozen")
+    planner = make_planner("mpc_frozen", make_config())
     pred = _crossing_walker(0, 0.4)
     result = planner.plan(np.zeros(5), GOAL, pred)
     assert result.status == "solved"

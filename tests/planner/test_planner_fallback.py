@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 
+import casadi as ca
 import numpy as np
+from planner_helpers import make_config
 
 from planner import MPCConfig, MPCPlanner, PedPrediction, brake_control, clip_control, frozen_prediction
 
@@ -20,8 +22,6 @@ class _FakeSolver:
     def __call__(self, **_):
         if self.mode == "raise":
             raise RuntimeError("boom")
-        import casadi as ca
-
         return {"x": ca.DM(np.full(self.n, np.nan))}
 
     def stats(self):
@@ -33,7 +33,7 @@ def _break_solver(planner: MPCPlanner, mode: str) -> None:
 
 
 def test_solver_failure_replays_previous_plan_then_brakes():
-    cfg = MPCConfig(max_plan_reuse_steps=2)
+    cfg = make_config(max_plan_reuse_steps=2)
     planner = MPCPlanner(cfg)
     state = np.zeros(5)
     good = planner.plan(state, GOAL, None)
@@ -57,7 +57,7 @@ def test_solver_failure_replays_previous_plan_then_brakes():
 
 
 def test_nan_solution_falls_back():
-    planner = MPCPlanner()
+    planner = MPCPlanner(make_config())
     _break_solver(planner, "nan")
     result = planner.plan(np.array([0.0, 0.0, 0.0, 0.8, 0.0]), GOAL, None)
     assert result.status == "nan" and result.fallback == "brake"
@@ -75,7 +75,7 @@ def test_wall_time_budget_exceeded_counts_as_timeout():
 
 
 def test_stats_summary_reports_percentiles_and_fallback_rate():
-    planner = MPCPlanner()
+    planner = MPCPlanner(make_config())
     for _ in range(3):
         planner.plan(np.zeros(5), GOAL, None)
     summary = planner.stats.summary()
@@ -85,7 +85,7 @@ def test_stats_summary_reports_percentiles_and_fallback_rate():
 
 def test_random_scenes_never_raise_and_respect_bounds():
     rng = np.random.default_rng(7)
-    planner = MPCPlanner(MPCConfig(max_peds=4, max_groups=2, max_walls=3))
+    planner = MPCPlanner(make_config(max_peds=4, max_groups=2, max_walls=3))
     robot = planner.config.robot
     for _ in range(25):
         n = int(rng.integers(0, 9))

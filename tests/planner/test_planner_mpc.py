@@ -7,10 +7,9 @@ import dataclasses
 import casadi as ca
 import numpy as np
 import pytest
-from planner_helpers import drive
+from planner_helpers import drive, make_config
 
 from planner import (
-    MPCConfig,
     MPCPlanner,
     PedPrediction,
     RobotConfig,
@@ -40,7 +39,7 @@ def _check_bounds(states: np.ndarray, robot: RobotConfig, dt: float, tol: float 
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_empty_space_reaches_goal_within_bounds(solver, goal):
-    planner = MPCPlanner(MPCConfig(solver=solver))
+    planner = MPCPlanner(make_config(solver=solver))
     states, results = drive(planner, np.array([0.0, 0.0, 1.0, 0.0, 0.0]), goal, lambda *_: None, 30)
     assert np.linalg.norm(states[-1, :2] - goal) < planner.config.robot.radius_m
     _check_bounds(states, planner.config.robot, planner.config.dt_s)
@@ -50,7 +49,7 @@ def test_empty_space_reaches_goal_within_bounds(solver, goal):
 
 def test_holonomic_reaches_goal_within_bounds(goal):
     robot = RobotConfig(model="holonomic")
-    planner = MPCPlanner(MPCConfig(robot=robot))
+    planner = MPCPlanner(make_config(robot=robot))
     states, results = drive(planner, np.zeros(4), goal, lambda *_: None, 30)
     assert np.linalg.norm(states[-1, :2] - goal) < robot.radius_m
     speed = np.linalg.norm(states[:, 2:4], axis=1)
@@ -62,7 +61,7 @@ def test_holonomic_reaches_goal_within_bounds(goal):
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_keeps_clearance_from_pedestrian_on_the_line(solver, goal):
-    cfg = MPCConfig(solver=solver)
+    cfg = make_config(solver=solver)
     pred = frozen_prediction(np.array([[4.0, 0.0]]), radii=np.array([0.3]))
     states, results = drive(MPCPlanner(cfg), np.zeros(5), goal, lambda *_: pred, 30)
     dist = np.linalg.norm(states[:, :2] - [4.0, 0.0], axis=1)
@@ -87,7 +86,7 @@ def _crossing_side(states: np.ndarray, x_line: float) -> float:
 def test_passes_around_not_between_a_group(solver, goal):
     # Two members 1.8 m apart centre to centre: 1.2 m gap between their bodies, across the path.
     members = np.array([[4.0, 0.9], [4.0, -0.9]])
-    cfg = MPCConfig(solver=solver)
+    cfg = make_config(solver=solver)
     as_group = frozen_prediction(members, group_ids=np.array([0, 0]))
     states, _ = drive(MPCPlanner(cfg), np.zeros(5), goal, lambda *_: as_group, 35)
     assert abs(_crossing_side(states, 4.0)) > 0.9 + 0.3 + cfg.robot.radius_m - 0.02
@@ -100,7 +99,7 @@ def test_passes_around_not_between_a_group(solver, goal):
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_start_inside_pedestrian_gives_fallback_without_exception(solver, goal):
-    planner = MPCPlanner(MPCConfig(solver=solver))
+    planner = MPCPlanner(make_config(solver=solver))
     pred = frozen_prediction(np.array([[0.2, 0.0]]))
     result = planner.plan(np.zeros(5), goal, pred)
     assert result.fallback_used and result.fallback == "brake"
@@ -121,7 +120,7 @@ class _ExplodingSolver:
 def test_nan_in_prediction_raises_before_solver_runs(goal):
     with pytest.raises(ValueError, match="NaN"):
         frozen_prediction(np.array([[np.nan, 1.0]]))
-    planner = MPCPlanner()
+    planner = MPCPlanner(make_config())
     planner.ocp = dataclasses.replace(planner.ocp, solver=_ExplodingSolver())
     pred = frozen_prediction(np.array([[4.0, 1.0]]))
     pred.positions[0, 3, 0, 1] = np.nan  # corrupt after construction: plan() must re-check
@@ -138,13 +137,13 @@ def test_nan_of_masked_out_pedestrians_is_ignored(goal):
     positions = np.full((1, 12, 2, 2), np.nan)
     positions[:, :, 0] = [6.0, 3.0]
     pred = PedPrediction(positions, np.array([0.3, np.nan]), np.array([0, 1]), np.array([True, False]))
-    result = MPCPlanner().plan(np.zeros(5), goal, pred)
+    result = MPCPlanner(make_config()).plan(np.zeros(5), goal, pred)
     assert result.status == "solved"
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_same_inputs_give_same_control(solver, goal):
-    cfg = MPCConfig(solver=solver)
+    cfg = make_config(solver=solver)
     pred = frozen_prediction(np.array([[3.0, 0.3], [5.0, -1.0]]), group_ids=np.array([0, 1]))
     state = np.array([0.0, 0.0, 0.2, 0.5, 0.0])
     first = MPCPlanner(cfg).plan(state, goal, pred)
@@ -158,7 +157,7 @@ def test_same_inputs_give_same_control(solver, goal):
 
 
 def test_plan_agrees_with_the_dynamics_function(goal):
-    planner = MPCPlanner()
+    planner = MPCPlanner(make_config())
     pred = frozen_prediction(np.array([[4.0, 0.2]]))
     result = planner.plan(np.array([0.0, 0.0, 0.3, 0.4, 0.1]), goal, pred)
     assert result.status == "solved"
@@ -179,7 +178,7 @@ def _segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nd
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_keeps_clear_of_walls(solver, goal):
-    cfg = MPCConfig(solver=solver)
+    cfg = make_config(solver=solver)
     wall = np.array([[4.0, -0.5, 4.0, 3.0]])  # blocks the straight line; open below y = -0.5
     states, results = drive(MPCPlanner(cfg), np.zeros(5), goal, lambda *_: None, 35, obstacles=wall)
     pairs = zip(states[:-1, :2], states[1:, :2], strict=True)
@@ -191,7 +190,7 @@ def test_keeps_clear_of_walls(solver, goal):
 
 def test_finer_plan_step_interpolates_predictions(goal):
     # Plan step 0.2 s (predictions at 0.4 s are interpolated); a walker crosses the path.
-    cfg = MPCConfig(dt_s=0.2, horizon_steps=20)
+    cfg = make_config(dt_s=0.2, horizon_steps=20)
     planner = MPCPlanner(cfg)
 
     def walker(step: int, _state) -> PedPrediction:
@@ -207,7 +206,7 @@ def test_finer_plan_step_interpolates_predictions(goal):
 
 
 def test_midpoint_checks_keep_clearance_half_way(goal):
-    cfg = MPCConfig(check_midpoints=True)
+    cfg = make_config(check_midpoints=True)
     planner = MPCPlanner(cfg)
     pred = frozen_prediction(np.array([[4.0, 0.0]]))
     states, results = drive(planner, np.zeros(5), goal, lambda *_: pred, 30)

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner import MPCConfig, PedPrediction, constant_velocity_prediction, polygon_to_segments, select_modes
+from planner import (
+    MPCConfig,
+    PedPrediction,
+    constant_velocity_prediction,
+    frozen_prediction,
+    polygon_to_segments,
+    select_modes,
+)
 from planner.scene import (
     build_scene,
     farthest_point_samples,
@@ -97,3 +104,11 @@ def test_obstacles_accept_segments_or_polygons():
         validate_obstacles(np.zeros((2, 3)))
     with pytest.raises(ValueError, match="NaN"):
         validate_obstacles(np.array([[0.0, 0.0, np.nan, 1.0]]))
+
+
+def test_group_spread_wider_than_max_span_is_not_a_region():
+    cfg = MPCConfig(max_groups=1, n_modes=1, max_group_span_m=3.0)
+    close = frozen_prediction(np.array([[4.0, 0.5], [4.0, -0.5]]), group_ids=np.array([0, 0]))
+    apart = frozen_prediction(np.array([[4.0, 2.5], [4.0, -2.5]]), group_ids=np.array([0, 0]))
+    assert np.all(build_scene(np.zeros(2), close, None, cfg).grp_clear > 0)
+    assert np.all(build_scene(np.zeros(2), apart, None, cfg).grp_clear < -100)

@@ -83,3 +83,15 @@ def test_group_scores_sum_counts_over_windows() -> None:
     assert res["gmitre_recall"] == pytest.approx((3 + 1) / (4 + 1))
     assert res["pw_precision"] == pytest.approx(1.0)
     assert res["pw_recall"] == pytest.approx((4 + 1) / (10 + 1))
+
+
+def test_report_table_averages_scenes(tmp_path) -> None:
+    import json
+
+    from predictor.report import load_results, table
+
+    for i, scene in enumerate(("eth", "hotel", "univ", "zara1", "zara2")):
+        res = {"ade": 0.1 * (i + 1), "fde": 0.2, "col": 1.0, "tcc": 0.5, "seed": 0, "trials": 3}
+        (tmp_path / f"gpgraph-stgcnn-{scene}-iid.json").write_text(json.dumps(res))
+    text = table(load_results(tmp_path), "iid")
+    assert "| gpgraph-stgcnn | 0.10/0.20 |" in text and "0.300/0.200" in text

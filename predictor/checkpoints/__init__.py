@@ -1,0 +1,1 @@
+"""Packaged checkpoints (``<name>.safetensors``), loadable by name with ``predictor.load_predictor``."""

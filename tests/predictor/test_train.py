@@ -1,0 +1,70 @@
+"""Batched training: micro-batching keeps the gradient of the full batch; batching keeps the loss."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from predictor.batch import collate
+from predictor.model import GPGraph, GPGraphConfig
+from predictor.train import TrainConfig, batch_loss, make_batches, split_by_size
+from predictor.windows import Window
+
+
+def _windows(sizes: list[int], seed: int = 0) -> list[Window]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for n in sizes:
+        traj = np.cumsum(rng.normal(scale=0.3, size=(20, n, 2)), axis=0)
+        out.append(Window(traj[:8], traj[8:], np.arange(n), None))
+    return out
+
+
+def _grads(model: GPGraph) -> torch.Tensor:
+    return torch.cat([p.grad.flatten() for p in model.parameters() if p.grad is not None])
+
+
+def test_split_by_size_respects_budget() -> None:
+    parts = split_by_size(_windows([2, 9, 3, 2, 8]), max_pairs=27)
+    assert [[w.n_peds for w in p] for p in parts] == [[2, 2, 3], [8], [9]]
+    assert len(split_by_size(_windows([2, 9]), 0)) == 1
+
+
+def test_micro_batches_give_the_full_batch_gradient() -> None:
+    torch.manual_seed(0)
+    model = GPGraph(GPGraphConfig(backbone="stgcnn"))
+    windows = _windows([2, 5, 3, 7, 4])
+    batch_loss(model, collate(windows)).backward()
+    full = _grads(model).clone()
+    model.zero_grad()
+    parts = split_by_size(windows, max_pairs=30)
+    assert len(parts) > 1
+    for p in parts:
+        (batch_loss(model, collate(p)) * (len(p) / len(windows))).backward()
+    torch.testing.assert_close(_grads(model), full, atol=1e-5, rtol=1e-4)
+
+
+def test_batched_loss_is_mean_of_window_losses() -> None:
+    torch.manual_seed(0)
+    model = GPGraph(GPGraphConfig(backbone="stgcnn")).eval()
+    windows = _windows([3, 6])
+    with torch.no_grad():
+        joint = batch_loss(model, collate(windows))
+        alone = [batch_loss(model, collate([w])) for w in windows]
+    assert joint.item() == pytest.approx(float(np.mean([a.item() for a in alone])), rel=1e-5)
+
+
+def test_make_batches_covers_every_window_once() -> None:
+    windows = _windows([2, 3, 4, 5, 6, 7, 8])
+    steps = make_batches(windows, batch_size=3, bucket=2, rng=np.random.default_rng(0), max_pairs=40)
+    sizes = sorted(int(n) for step in steps for b in step for n in b.node_mask.sum(dim=1))
+    assert sizes == [2, 3, 4, 5, 6, 7, 8]
+    assert all(sum(b.node_mask.shape[0] for b in step) <= 3 for step in steps)
+
+
+def test_train_config_validation() -> None:
+    with pytest.raises(ValueError):
+        TrainConfig(lr=0.0)
+    with pytest.raises(ValueError):
+        TrainConfig(max_pairs=-1)
