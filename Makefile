@@ -32,6 +32,7 @@ lint: setup
 
 bench: setup
 	$(PY) bench/bench_crowdsim.py
+	$(PY) bench/bench_planner.py --quick
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .ruff_cache
