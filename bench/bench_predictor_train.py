@@ -64,7 +64,7 @@ def main() -> None:
     ap.add_argument("--windows", type=int, default=512, help="windows for the batched run")
     ap.add_argument("--loop-windows", type=int, default=128, help="windows for the batch-size-1 loop")
     ap.add_argument("--batch", type=int, default=128)
-    ap.add_argument("--max-pairs", type=int, default=8192, help="micro-batch budget B * N_max^2")
+    ap.add_argument("--max-pairs", type=int, default=16384, help="micro-batch budget B * N_max^2")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     rng = np.random.default_rng(0)
@@ -74,7 +74,8 @@ def main() -> None:
     pick = rng.permutation(len(windows))
     print(f"data: {source}; backbone {args.backbone}; threads {args.threads}")
     modes = [("batch 128, random", 1, 0), ("batch 128, size-sorted", 8, 0),
-             (f"random, micro {args.max_pairs}", 1, args.max_pairs)]
+             (f"random, micro {args.max_pairs}", 1, args.max_pairs),
+             (f"size-sorted, micro {args.max_pairs}", 8, args.max_pairs)]
     print(f"{'model':<18}{'mode':<28}{'batched win/s':>14}{'bs-1 loop win/s':>17}{'speed-up':>10}")
     for name, cfg in [("GP-Graph-" + args.backbone, GPGraphConfig(backbone=args.backbone)),
                       (args.backbone + " alone", GPGraphConfig.backbone_only(args.backbone))]:

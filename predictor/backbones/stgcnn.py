@@ -25,13 +25,12 @@ def laplacian_adjacency(rel: Tensor, node_mask: Tensor, edge_mask: Tensor | None
     """(B, T, N, N) normalised graph I - D^-1/2 (A + I) D^-1/2 from displacements ``rel`` (B, T, N, 2)."""
     n = rel.shape[2]
     dist = torch.cdist(rel, rel, compute_mode="donot_use_mm_for_euclid_dist")
-    inv = torch.where(dist > 0, 1.0 / dist.clamp_min(1e-12), torch.zeros_like(dist))
     keep = pair_mask(node_mask) if edge_mask is None else pair_mask(node_mask) & edge_mask
+    keep = keep[:, None] & (dist > 0)
     eye = torch.eye(n, dtype=rel.dtype, device=rel.device)
-    a_hat = inv * keep[:, None].to(rel.dtype) + eye
+    a_hat = torch.where(keep, dist.clamp_min(1e-12).reciprocal(), torch.zeros_like(dist)) + eye
     d = a_hat.sum(dim=-1).rsqrt()
-    lap = eye - d[..., :, None] * a_hat * d[..., None, :]
-    return lap * pair_mask(node_mask)[:, None].to(rel.dtype)
+    return eye - d[..., :, None] * a_hat * d[..., None, :]  # rows/columns of padded nodes are zero
 
 
 class STGCNN(Backbone):
