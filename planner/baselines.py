@@ -25,53 +25,49 @@ from planner.prediction import (
 from planner.result import PlanResult, PlanStats
 
 
-class ConstantVelocityMPC:
+class _PredictionSwapMPC:
+    """The MPC fed a replacement for the predictor's samples; subclasses define `_replace`."""
+
+    def __init__(self, config: MPCConfig | None = None) -> None:
+        self.mpc = MPCPlanner(config)
+        self.config = self.mpc.config
+
+    @property
+    def stats(self) -> PlanStats:
+        return self.mpc.stats
+
+    def reset(self) -> None:
+        self.mpc.reset()
+
+    def _replace(self, prediction: PedPrediction) -> PedPrediction:
+        raise NotImplementedError
+
+    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
+        if prediction is not None:
+            check_inputs(robot_state, goal, prediction, obstacles, self.mpc.dims.state_dim)
+            prediction = self._replace(prediction)
+        return self.mpc.plan(robot_state, goal, prediction, obstacles)
+
+
+class ConstantVelocityMPC(_PredictionSwapMPC):
     """The MPC with constant-velocity predictions (K=1) from ``prediction.history`` (T_obs >= 2 rows,
     ``prediction.step_s`` apart); the prediction's own samples are ignored."""
 
-    def __init__(self, config: MPCConfig | None = None) -> None:
-        self.mpc = MPCPlanner(config)
-        self.config = self.mpc.config
-
-    @property
-    def stats(self) -> PlanStats:
-        return self.mpc.stats
-
-    def reset(self) -> None:
-        self.mpc.reset()
-
-    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
-        if prediction is not None:
-            check_inputs(robot_state, goal, prediction, obstacles, self.mpc.dims.state_dim)
-            if prediction.history is None:
-                raise ValueError("ConstantVelocityMPC needs prediction.history (T_obs, N, 2)")
-            prediction = constant_velocity_prediction(
-                prediction.history, prediction.radii, prediction.group_ids, prediction.mask,
-                n_steps=np.shape(prediction.positions)[1], step_s=prediction.step_s)
-        return self.mpc.plan(robot_state, goal, prediction, obstacles)
+    def _replace(self, prediction: PedPrediction) -> PedPrediction:
+        if prediction.history is None:
+            raise ValueError("ConstantVelocityMPC needs prediction.history (T_obs, N, 2)")
+        return constant_velocity_prediction(
+            prediction.history, prediction.radii, prediction.group_ids, prediction.mask,
+            n_steps=np.shape(prediction.positions)[1], step_s=prediction.step_s)
 
 
-class FrozenMPC:
+class FrozenMPC(_PredictionSwapMPC):
     """The MPC with every pedestrian frozen at its current position (no prediction)."""
 
-    def __init__(self, config: MPCConfig | None = None) -> None:
-        self.mpc = MPCPlanner(config)
-        self.config = self.mpc.config
-
-    @property
-    def stats(self) -> PlanStats:
-        return self.mpc.stats
-
-    def reset(self) -> None:
-        self.mpc.reset()
-
-    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
-        if prediction is not None:
-            check_inputs(robot_state, goal, prediction, obstacles, self.mpc.dims.state_dim)
-            prediction = frozen_prediction(
-                current_positions(prediction), prediction.radii, prediction.group_ids, prediction.mask,
-                n_steps=np.shape(prediction.positions)[1], step_s=prediction.step_s)
-        return self.mpc.plan(robot_state, goal, prediction, obstacles)
+    def _replace(self, prediction: PedPrediction) -> PedPrediction:
+        return frozen_prediction(
+            current_positions(prediction), prediction.radii, prediction.group_ids, prediction.mask,
+            n_steps=np.shape(prediction.positions)[1], step_s=prediction.step_s)
 
 
 @dataclass(frozen=True)
