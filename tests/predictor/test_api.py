@@ -150,3 +150,10 @@ def test_reference_checkpoint_through_api(reference: Path) -> None:
     assert p.model.config.grouping == "official" and p.model.config.backbone == "sgcn"
     out = p.predict(_history(6), n_samples=5, rng=np.random.default_rng(0))
     assert out.samples.shape == (5, 12, 6, 2)
+
+
+def test_reference_checkpoint_with_wrong_backbone(reference: Path) -> None:
+    with pytest.raises(CheckpointError, match="does not fit a stgcnn"):
+        load_predictor(reference / "hotel" / "val_best.pth", backbone="stgcnn")
+    with pytest.raises(ValueError, match="valid backbones"):
+        load_predictor(reference / "hotel" / "val_best.pth", backbone="transformer")

@@ -111,3 +111,11 @@ def test_cli_evaluates_reference_checkpoint(reference: Path, eth_ucy: Path, tmp_
     res = json.loads(out.read_text())
     assert res["pedestrians"] == 1053 and res["grouping"] == "official"
     assert 0.2 < res["ade"] < 0.4 and 0.4 < res["fde"] < 0.75  # reference README: 0.30 / 0.58 (iid)
+
+
+def test_train_rejects_a_scene_with_one_pedestrian(tmp_path: Path, capsys) -> None:
+    for split in ("train", "val"):
+        (tmp_path / split).mkdir()
+        (tmp_path / split / "solo.txt").write_text("".join(f"{10 * f}\t1\t{0.1 * f}\t0.0\n" for f in range(30)))
+    assert _train(tmp_path, tmp_path / "out", 1) == 1
+    assert "no windows with >= 2 pedestrians" in capsys.readouterr().err
