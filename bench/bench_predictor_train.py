@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from predictor.backbones import BACKBONES
 from predictor.batch import collate
 from predictor.gaussian import masked_nll
 from predictor.model import GPGraph, GPGraphConfig
@@ -64,9 +65,12 @@ def main() -> None:
     ap.add_argument("--windows", type=int, default=512, help="windows for the batched run")
     ap.add_argument("--loop-windows", type=int, default=128, help="windows for the batch-size-1 loop")
     ap.add_argument("--batch", type=int, default=128)
-    ap.add_argument("--max-pairs", type=int, default=16384, help="micro-batch budget B * N_max^2")
+    ap.add_argument("--max-pairs", type=int, default=None,
+                    help="micro-batch budget B * N_max^2 (default: the backbone's pair_budget)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    if args.max_pairs is None:
+        args.max_pairs = BACKBONES[args.backbone].pair_budget
     rng = np.random.default_rng(0)
     folder = DATA / args.scene / "train"
     source = str(folder) if folder.is_dir() else "synthetic"

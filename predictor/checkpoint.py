@@ -164,3 +164,4 @@ def export_packaged(model: GPGraph, path: str | Path, meta: dict | None = None) 
     state = {k: v.detach().contiguous() for k, v in model.state_dict().items()}
     metadata = {"format": FORMAT, "config": json.dumps(model.config.to_dict()), "meta": json.dumps(meta or {})}
     save_file(state, str(path), metadata=metadata)
+    os.chmod(path, 0o644)

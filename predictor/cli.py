@@ -79,7 +79,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     print(format_table(result))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(result, indent=2) + "\n")
+        clean = {k: (None if isinstance(v, float) and v != v else v) for k, v in result.items()}  # NaN -> null
+        Path(args.json).write_text(json.dumps(clean, indent=2, allow_nan=False) + "\n")
     return 0
 
 
@@ -114,8 +115,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--batch-size", type=int, default=TrainConfig.batch_size)
     t.add_argument("--lr", type=float, default=TrainConfig.lr)
     t.add_argument("--bucket", type=int, default=TrainConfig.bucket, help="size-sorting chunk, in batches")
-    t.add_argument("--max-pairs", type=int, default=TrainConfig.max_pairs,
-                   help="micro-batch budget B * N_max^2 (0: one forward pass per batch)")
+    t.add_argument("--max-pairs", type=int, default=None,
+                   help="micro-batch budget B * N_max^2 (0: one pass per batch; default: the backbone's)")
     t.add_argument("--bce-weight", type=float, default=0.0, help="GP-Graph+S BCE weight (needs labels)")
     t.add_argument("--rotate", action="store_true", help="random rotation augmentation")
     t.add_argument("--seed", type=int, default=0)

@@ -2,7 +2,9 @@
 
 A trajectory file has one row per (frame, pedestrian): ``frame ped x y`` separated by tabs or
 whitespace, positions in metres. A group file (``X.groups.txt`` beside ``X.txt``) holds one group
-per line, member pedestrian ids separated by whitespace; blank lines are allowed.
+per line, member pedestrian ids separated by whitespace; blank lines are allowed. crowdsim exports may
+also carry ``X.labels.tsv`` (``frame ped group`` per row of ``X.txt``): exact per-frame labels, which take
+precedence over the group file.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 GROUP_SUFFIX = ".groups.txt"
+LABELS_SUFFIX = ".labels.tsv"
 
 
 class DataFormatError(ValueError):
@@ -27,29 +30,32 @@ class Recording:
         path: source file.
         rows: (R, 4) float64 array of ``frame, ped, x, y`` (x, y in metres).
         groups: ground-truth groups as a tuple of tuples of ped ids, or None when no group file exists.
+        frame_labels: (L, 3) float64 ``frame, ped, group`` per-frame labels, or None without a labels file.
     """
 
     path: Path
     rows: np.ndarray
     groups: tuple[tuple[int, ...], ...] | None = None
+    frame_labels: np.ndarray | None = None
 
 
-def read_trajectory_file(path: str | Path) -> np.ndarray:
-    """Read ``frame ped x y`` rows; returns a (R, 4) float64 array.
+def read_table(path: str | Path, fields: str = "frame ped x y") -> np.ndarray:
+    """Read whitespace-separated numeric rows with the given field names; returns (R, n_fields) float64.
 
     Raises:
-        DataFormatError: naming the file and 1-based line for a row that is not four finite numbers.
+        DataFormatError: naming the file and 1-based line for a row that is not n finite numbers.
     """
     path = Path(path)
+    width = len(fields.split())
     rows: list[list[float]] = []
     with path.open() as f:
         for lineno, line in enumerate(f, start=1):
             parts = line.split()
             if not parts:
                 continue
-            if len(parts) != 4:
+            if len(parts) != width:
                 raise DataFormatError(
-                    f"{path}:{lineno}: expected 4 fields 'frame ped x y', got {len(parts)}: {line.strip()!r}"
+                    f"{path}:{lineno}: expected {width} fields '{fields}', got {len(parts)}: {line.strip()!r}"
                 )
             try:
                 values = [float(p) for p in parts]
@@ -59,8 +65,13 @@ def read_trajectory_file(path: str | Path) -> np.ndarray:
                 raise DataFormatError(f"{path}:{lineno}: non-finite value in {line.strip()!r}")
             rows.append(values)
     if not rows:
-        return np.zeros((0, 4))
+        return np.zeros((0, width))
     return np.asarray(rows, dtype=np.float64)
+
+
+def read_trajectory_file(path: str | Path) -> np.ndarray:
+    """Read ``frame ped x y`` rows (tabs or spaces); returns a (R, 4) float64 array, x and y in metres."""
+    return read_table(path, "frame ped x y")
 
 
 def read_group_file(path: str | Path) -> tuple[tuple[int, ...], ...]:
@@ -100,7 +111,9 @@ def read_recording(path: str | Path) -> Recording:
     rows = read_trajectory_file(path)
     gpath = group_file_for(path)
     groups = read_group_file(gpath) if gpath.exists() else None
-    return Recording(path=path, rows=rows, groups=groups)
+    lpath = path.with_name(path.name[: -len(".txt")] + LABELS_SUFFIX)
+    labels = read_table(lpath, "frame ped group") if lpath.exists() else None
+    return Recording(path=path, rows=rows, groups=groups, frame_labels=labels)
 
 
 def list_trajectory_files(folder: str | Path) -> list[Path]:

@@ -6,6 +6,10 @@ covariance; positions are the cumulative sum from the last observed position. Ho
     by 0.8, as the GP-Graph authors' test script does; drawn from a pool of precomputed centroid sets);
   - ``level``: shared by a 'group', the whole 'scene', or drawn per 'pedestrian';
   - ``per_step``: a fresh draw per future step, or one held constant over the 12 steps.
+
+The 'paper' protocol gives every predicted group its own centroid set. (The authors' script indexes the
+per-group draws twice by the group labels, so two groups can end up with the same set; members of one
+group share theirs either way. We keep the stated scheme, which reproduces their published ADE/FDE.)
 """
 
 from __future__ import annotations

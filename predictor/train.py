@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 from tqdm import tqdm
 
+from predictor.backbones import BACKBONES
 from predictor.batch import Batch, collate
 from predictor.checkpoint import FORMAT, load_state, read_file, save_atomic, save_model
 from predictor.gaussian import masked_nll
@@ -41,7 +42,8 @@ class TrainConfig:
         bucket: batches drawn from chunks of ``bucket * batch_size`` shuffled windows sorted by size
             (less padding); 1 disables sorting.
         max_pairs: split each optimiser batch into size-sorted micro-batches of at most this many
-            padded pair slots (B * N_max^2), accumulating gradients; 0 disables splitting.
+            padded pair slots (B * N_max^2), accumulating gradients; 0 disables splitting; None uses the
+            backbone's ``pair_budget`` (measured fastest on CPU).
         seed: seeds the numpy Generator (shuffling, rotations) and the initial weights.
     """
 
@@ -54,15 +56,20 @@ class TrainConfig:
     clip_grad: float = 10.0
     rotate: bool = False
     bucket: int = 8
-    max_pairs: int = 0
+    max_pairs: int | None = None
     seed: int = 0
     model: GPGraphConfig = field(default_factory=GPGraphConfig)
 
     def __post_init__(self) -> None:
-        if self.epochs < 1 or self.batch_size < 1 or self.bucket < 1 or self.max_pairs < 0:
+        if self.epochs < 1 or self.batch_size < 1 or self.bucket < 1 or (self.max_pairs or 0) < 0:
             raise ValueError("epochs, batch_size and bucket must be >= 1 and max_pairs >= 0")
         if self.lr <= 0 or self.weight_decay < 0 or self.clip_grad <= 0 or not 0 < self.gamma <= 1:
             raise ValueError("need lr > 0, weight_decay >= 0, clip_grad > 0 and 0 < gamma <= 1")
+
+    @property
+    def pair_budget(self) -> int:
+        """The micro-batch budget in effect."""
+        return BACKBONES[self.model.backbone].pair_budget if self.max_pairs is None else self.max_pairs
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -197,7 +204,7 @@ def train(
     for epoch in bar:
         tic = time.perf_counter()
         windows = augment_rotations(train_windows, rng) if cfg.rotate else train_windows
-        steps = make_batches(windows, cfg.batch_size, cfg.bucket, rng, cfg.max_pairs)
+        steps = make_batches(windows, cfg.batch_size, cfg.bucket, rng, cfg.pair_budget)
         tr = train_epoch(model, steps, opt, cfg.clip_grad)
         va = validation_loss(model, val_batches)
         lr = opt.param_groups[0]["lr"]

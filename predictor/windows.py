@@ -66,6 +66,29 @@ def _presence(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
     return frames, peds, present, pos
 
 
+def _label_table(frame_labels: np.ndarray, frames: np.ndarray, peds: np.ndarray) -> np.ndarray:
+    """Dense (F, P) per-frame group labels (-1 where a row has none) aligned with ``_presence``."""
+    table = -np.ones((len(frames), len(peds)), dtype=np.int64)
+    fi = np.searchsorted(frames, frame_labels[:, 0])
+    pi = np.searchsorted(peds, frame_labels[:, 1])
+    ok = (fi < len(frames)) & (pi < len(peds))
+    ok[ok] &= (frames[fi[ok]] == frame_labels[ok, 0]) & (peds[pi[ok]] == frame_labels[ok, 1])
+    table[fi[ok], pi[ok]] = frame_labels[ok, 2].astype(np.int64)
+    return table
+
+
+def _window_labels(
+    rec: Recording, table: np.ndarray | None, frame: int, cols: np.ndarray, ids: np.ndarray
+) -> np.ndarray | None:
+    """Window group ids: per-frame labels at the last observed frame, else the group file, else None."""
+    if table is not None:
+        raw = table[frame, cols]
+        raw = np.where(raw < 0, -1 - np.arange(len(raw)), raw)  # unlabelled rows: own groups
+        remap: dict[int, int] = {}
+        return np.array([remap.setdefault(int(r), len(remap)) for r in raw], dtype=np.int64)
+    return labels_for(ids, rec.groups) if rec.groups is not None else None
+
+
 def recording_windows(
     rec: Recording, obs_len: int = OBS_LEN, pred_len: int = PRED_LEN, min_peds: int = 2
 ) -> list[Window]:
@@ -76,6 +99,7 @@ def recording_windows(
     frames, peds, present, pos = _presence(rec.rows)
     if len(frames) < seq_len:
         return []
+    labels = _label_table(rec.frame_labels, frames, peds) if rec.frame_labels is not None else None
     csum = np.concatenate([np.zeros((1, len(peds)), dtype=np.int64), np.cumsum(present, axis=0)])
     full = (csum[seq_len:] - csum[:-seq_len]) == seq_len  # (F - seq_len + 1, P)
     out: list[Window] = []
@@ -83,7 +107,7 @@ def recording_windows(
         cols = np.flatnonzero(full[start])
         traj = pos[start : start + seq_len, cols]
         ids = peds[cols].astype(np.int64)
-        gid = labels_for(ids, rec.groups) if rec.groups is not None else None
+        gid = _window_labels(rec, labels, start + obs_len - 1, cols, ids)
         out.append(
             Window(
                 obs=traj[:obs_len].copy(),

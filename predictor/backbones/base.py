@@ -24,6 +24,7 @@ class Backbone(nn.Module):
     """Base class: set ``in_features``, implement ``features`` and ``forward``."""
 
     in_features: int = 2
+    pair_budget: int = 16384  # default training micro-batch size, padded pair slots B * N_max^2
 
     def features(self, rel: Tensor) -> Tensor:
         """Node features (B, T, N, in_features) from observed displacements ``rel`` (B, T, N, 2)."""

@@ -91,6 +91,7 @@ class SGCN(Backbone):
     """Sparse graph convolution network. Shapes in the class docstring of the module."""
 
     in_features = 3
+    pair_budget = 4096  # its N x N interaction maps are memory bound: small micro-batches train fastest
 
     def __init__(
         self,

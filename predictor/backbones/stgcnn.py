@@ -37,6 +37,7 @@ class STGCNN(Backbone):
     """Social-STGCNN: 1 ST-GCN layer (2 -> 5 channels) and a 5-layer time-extrapolator CNN."""
 
     in_features = 2
+    pair_budget = 65536
 
     def __init__(self, obs_len: int = 8, pred_len: int = 12, channels: int = 5, n_txp: int = 5) -> None:
         super().__init__()

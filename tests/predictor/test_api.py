@@ -157,3 +157,18 @@ def test_reference_checkpoint_with_wrong_backbone(reference: Path) -> None:
         load_predictor(reference / "hotel" / "val_best.pth", backbone="stgcnn")
     with pytest.raises(ValueError, match="valid backbones"):
         load_predictor(reference / "hotel" / "val_best.pth", backbone="transformer")
+
+
+@pytest.mark.parametrize("name", ["gpgraph-stgcnn-hotel", "stgcnn-zara1"])
+def test_packaged_checkpoints_load_by_name(name: str) -> None:
+    from predictor.checkpoint import PACKAGE_CHECKPOINTS
+
+    if not (PACKAGE_CHECKPOINTS / f"{name}.safetensors").is_file():
+        pytest.skip(f"packaged checkpoint {name} not present")
+    pred = load_predictor(name)
+    assert pred.model.config.backbone == "stgcnn"
+    assert pred.model.config.uses_groups == name.startswith("gpgraph")
+    out = pred.predict(_history(6), n_samples=4, rng=np.random.default_rng(0))
+    assert out.samples.shape == (4, 12, 6, 2) and np.isfinite(out.samples).all()
+    # a trained model predicts continuing motion: the mean moves on from the last observed position
+    assert np.linalg.norm(out.mean[-1] - _history(6)[-1], axis=-1).mean() > 0.5

@@ -123,3 +123,21 @@ def test_rotation_preserves_distances() -> None:
     np.testing.assert_allclose(rotate_window(w, 2 * np.pi).obs, w.obs, atol=1e-12)
     out = augment_rotations([w, w], np.random.default_rng(1))
     assert not np.allclose(out[0].obs, out[1].obs)
+
+
+def test_per_frame_labels_take_precedence_and_change_over_time(tmp_path: Path) -> None:
+    # peds 1 and 2 walk together for frames 0..29; the labels file says they split at frame 15
+    _write(tmp_path / "run.txt", _synthetic_rows(30, {1: range(30), 2: range(30), 3: range(30)}))
+    (tmp_path / "run.groups.txt").write_text("1 2 3\n")  # majority partition: ignored when labels exist
+    lines = [f"{10 * f}\t{p}\t{2 if (f >= 15 and p == 2) else (0 if p < 3 else 1)}\n"
+             for f in range(30) for p in (1, 2, 3)]
+    (tmp_path / "run.labels.tsv").write_text("".join(lines))
+    wins = load_windows(tmp_path)
+    assert len(wins) == 11
+    by_last_obs = {int(w.start_frame) // 10 + 7: w.group_id.tolist() for w in wins}
+    assert by_last_obs[14] == [0, 0, 1]  # together at the last observed frame
+    assert by_last_obs[15] == [0, 1, 2]  # split from frame 15 on
+    bad = tmp_path / "run.labels.tsv"
+    bad.write_text("0 1\n")
+    with pytest.raises(DataFormatError, match=r"run\.labels\.tsv:1.*'frame ped group'"):
+        load_windows(tmp_path)
