@@ -53,9 +53,13 @@ def check_history(history: np.ndarray) -> np.ndarray:
     return h
 
 
-def _check_samples(n_samples: int) -> None:
+def _check_inputs(history: np.ndarray, n_samples: int,
+                  rng: np.random.Generator | None) -> tuple[np.ndarray, np.random.Generator]:
+    """The checked (8, N, 2) history and the Generator to draw from (a fresh one when rng is None)."""
+    h = check_history(history)
     if not isinstance(n_samples, int | np.integer) or n_samples < 1:
         raise ValueError(f"n_samples must be a positive integer, got {n_samples!r}")
+    return h, rng if rng is not None else np.random.default_rng()
 
 
 class GPGraphPredictor:
@@ -70,9 +74,7 @@ class GPGraphPredictor:
         self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | None = None
     ) -> Prediction:
         """Sample ``n_samples`` futures from ``history`` (8, N, 2), m. Same rng state, same samples."""
-        h = check_history(history)
-        _check_samples(n_samples)
-        rng = rng if rng is not None else np.random.default_rng()
+        h, rng = _check_inputs(history, n_samples, rng)
         obs_abs = torch.as_tensor(h, dtype=torch.float32)[None]
         obs_rel = torch.as_tensor(relative(h), dtype=torch.float32)[None]
         out = self.model(obs_abs, obs_rel, torch.ones(1, h.shape[1], dtype=torch.bool))
@@ -114,9 +116,7 @@ class ConstantVelocityPredictor:
     def predict(
         self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | None = None
     ) -> Prediction:
-        h = check_history(history)
-        _check_samples(n_samples)
-        rng = rng if rng is not None else np.random.default_rng()
+        h, rng = _check_inputs(history, n_samples, rng)
         k = self.config.velocity_steps
         vel = (h[-1] - h[-1 - k]) / k  # (N, 2), m/step
         steps = np.arange(1, PRED_LEN + 1, dtype=np.float64)[:, None, None]
