@@ -6,6 +6,7 @@ from predictor.api import (
     GPGraphPredictor,
     Prediction,
     load_predictor,
+    set_threads,
 )
 from predictor.model import GPGraph, GPGraphConfig
 
@@ -17,4 +18,5 @@ __all__ = [
     "GPGraphPredictor",
     "Prediction",
     "load_predictor",
+    "set_threads",
 ]

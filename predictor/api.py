@@ -142,3 +142,11 @@ def load_predictor(
         return ConstantVelocityPredictor()
     model, _ = load_model(name_or_path, backbone=backbone, grouping=grouping)
     return GPGraphPredictor(model)
+
+
+def set_threads(n: int) -> None:
+    """Set torch's intra-op threads for this process (callers outside `predictor` never import torch).
+    On a small CPU, one thread per process avoids oversubscription when several processes run."""
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"threads must be a positive integer, got {n!r}")
+    torch.set_num_threads(n)

@@ -1,0 +1,170 @@
+"""Frozen configuration of the crowd-navigation env. Every default runs; fields carry their units."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from crowdsim import SCENARIOS, GroupConfig, SimConfig
+from planner import RobotConfig
+
+GROUP_SOURCES = ("truth", "predicted")
+REPLAY_SCENARIO = "replay"
+
+
+def _finite(obj: object, names: tuple[str, ...]) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not math.isfinite(value):
+            raise ValueError(f"{type(obj).__name__}.{name} must be finite, got {value!r}")
+
+
+def _positive(obj: object, names: tuple[str, ...]) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value > 0 or not math.isfinite(value):
+            raise ValueError(f"{type(obj).__name__}.{name} must be a positive finite number, got {value!r}")
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the named reward terms (see `envs.rewards`). The reward is the sum of weight x term.
+
+    Terms: progress (m of goal distance gained this step), success (1 on arrival), collision (1 on
+    contact), discomfort (seconds weighted by how deep the robot is inside the 0.2 m comfort zone, 0..dt),
+    group_intrusion (seconds spent inside a group's region), time (seconds elapsed).
+    """
+
+    progress_per_m: float = 1.0
+    success: float = 10.0
+    collision: float = -10.0
+    discomfort_per_s: float = -2.0
+    group_intrusion_per_s: float = -2.0
+    time_per_s: float = -0.1
+
+    def __post_init__(self) -> None:
+        _finite(self, tuple(self.__dataclass_fields__))
+
+    def as_dict(self) -> dict[str, float]:
+        return {
+            "progress": self.progress_per_m, "success": self.success, "collision": self.collision,
+            "discomfort": self.discomfort_per_s, "group_intrusion": self.group_intrusion_per_s,
+            "time": self.time_per_s,
+        }
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """What the agent observes (see `envs.observation` for the layout).
+
+    max_pedestrians: P, the nearest P pedestrians within `sensor_range_m` are observed, the rest padded.
+    sensor_range_m: pedestrians farther than this from the robot are not observed, m.
+    position_bound_m: Box bound on every relative position; values are clipped to it, m.
+    speed_bound_mps: Box bound on velocities, m/s.
+    group_source: "truth" (the simulator's labels) or "predicted" (the predictor's assignment).
+    predictions: include the predictor's sampled futures (K, 12, P, 2) in the observation.
+    n_prediction_samples: K in the observation.
+    predictor: predictor name or checkpoint path, used only for predicted groups or predictions.
+    """
+
+    max_pedestrians: int = 20
+    sensor_range_m: float = 10.0
+    position_bound_m: float = 40.0
+    speed_bound_mps: float = 5.0
+    group_source: str = "truth"
+    predictions: bool = False
+    n_prediction_samples: int = 3
+    predictor: str = "gpgraph-stgcnn-synthetic"
+
+    def __post_init__(self) -> None:
+        if self.max_pedestrians < 1:
+            raise ValueError(f"max_pedestrians must be >= 1, got {self.max_pedestrians}")
+        if self.n_prediction_samples < 1:
+            raise ValueError(f"n_prediction_samples must be >= 1, got {self.n_prediction_samples}")
+        _positive(self, ("sensor_range_m", "position_bound_m", "speed_bound_mps"))
+        if self.group_source not in GROUP_SOURCES:
+            raise ValueError(f"unknown group_source {self.group_source!r}; valid: {', '.join(GROUP_SOURCES)}")
+
+    @property
+    def needs_predictor(self) -> bool:
+        return self.predictions or self.group_source == "predicted"
+
+
+@dataclass(frozen=True)
+class CrowdNavConfig:
+    """The env: a crowd scenario, a robot with a goal, rewards and observation options.
+
+    scenario: a crowdsim scenario name, or "replay" (then `replay` must be set).
+    n_pedestrians: crowd size (simulated scenarios).
+    scenario_options: crowdsim scenario overrides as (name, value) pairs.
+    groups: group sizes and events (crowdsim's `GroupConfig`).
+    robot: robot body and kinematic limits (the planner's `RobotConfig`).
+    robot_visible: whether pedestrians see the robot (social force + physical contact); invisible robots
+        pass unseen, as in CrowdNav's invisible setting.
+    dt_s: env step, s. The predictor's step (0.4 s) must be a whole number of env steps.
+    time_limit_s: episode length before truncation, s.
+    warmup_s: crowd simulated before the robot starts moving (the robot stands at its start), s; fills the
+        pedestrians' 0.4 s history.
+    goal_tolerance_m: success when the robot centre is this close to the goal (CrowdNav: one robot radius), m.
+    discomfort_distance_m: surface distance under which a step counts as discomfort, m.
+    group_space_m: personal-space margin around a group's region (the hull of its members' discs); the robot
+        intrudes when its body comes closer than this to the region, m.
+    group_span_m: a ground-truth group wider than this (max pairwise distance) is not treated as a region, m.
+    start_clearance_m: surface clearance required around the robot's start when choosing a route, m.
+    rewards, observation: see their classes.
+    replay: an `envs.replay.ReplayConfig` for scenario "replay".
+    """
+
+    scenario: str = "plaza"
+    n_pedestrians: int = 24
+    scenario_options: tuple[tuple[str, float], ...] = ()
+    groups: GroupConfig = field(default_factory=GroupConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    robot_visible: bool = True
+    dt_s: float = 0.1
+    time_limit_s: float = 40.0
+    warmup_s: float = 3.2
+    goal_tolerance_m: float = 0.3
+    discomfort_distance_m: float = 0.2
+    group_space_m: float = 0.2
+    group_span_m: float = 3.0
+    start_clearance_m: float = 0.5
+    rewards: RewardWeights = field(default_factory=RewardWeights)
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    replay: Any = None
+
+    def __post_init__(self) -> None:
+        valid = (*sorted(SCENARIOS), REPLAY_SCENARIO)
+        if self.scenario not in valid:
+            raise ValueError(f"unknown scenario {self.scenario!r}; valid names: {', '.join(valid)}")
+        if self.scenario == REPLAY_SCENARIO and self.replay is None:
+            raise ValueError("scenario 'replay' needs replay=ReplayConfig(path=...)")
+        if self.n_pedestrians < 1:
+            raise ValueError(f"n_pedestrians must be >= 1, got {self.n_pedestrians}")
+        _positive(self, ("dt_s", "time_limit_s", "goal_tolerance_m", "discomfort_distance_m", "group_span_m"))
+        if not 0 <= self.group_space_m < math.inf:
+            raise ValueError(f"group_space_m must be finite and >= 0, got {self.group_space_m}")
+        if not 0 <= self.warmup_s < math.inf or self.start_clearance_m < 0:
+            raise ValueError("warmup_s and start_clearance_m must be finite and >= 0")
+        if abs(self.ticks_per_prediction_step * self.dt_s - 0.4) > 1e-9:
+            raise ValueError(f"dt_s must divide the 0.4 s prediction step, got {self.dt_s}")
+
+    @property
+    def ticks_per_prediction_step(self) -> int:
+        """Env steps per 0.4 s prediction step."""
+        return max(1, round(0.4 / self.dt_s))
+
+    @property
+    def max_steps(self) -> int:
+        return math.ceil(self.time_limit_s / self.dt_s - 1e-9)
+
+    def sim_config(self) -> SimConfig:
+        """The crowdsim config stepped at dt_s (forces every min(dt, 0.1) s)."""
+        from crowdsim import RobotConfig as SimRobot
+
+        return SimConfig(
+            scenario=self.scenario, n_pedestrians=self.n_pedestrians, record_dt_s=self.dt_s,
+            force_dt_s=min(self.dt_s, 0.1), groups=self.groups, scenario_options=self.scenario_options,
+            robot=SimRobot(visible=self.robot_visible, radius_m=self.robot.radius_m),
+        )

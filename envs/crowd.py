@@ -1,0 +1,89 @@
+"""Crowd sources behind one small interface: the social-force simulator, or a replayed recording.
+
+The env only talks to a `Crowd`. `SimCrowd` wraps `crowdsim.CrowdSimulator` (reactive pedestrians, optional
+robot visibility); `envs.replay.ReplayCrowd` replays an ETH/UCY-format file (non-reactive pedestrians).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from crowdsim import CrowdSimulator, CrowdState, SimConfig
+
+
+class Crowd(Protocol):
+    """What the env needs from a crowd.
+
+    Attributes:
+        name: scenario name.
+        walls: (W, 2, 2) static wall segments, m.
+        bounds: (x_min, y_min, x_max, y_max) of the scene, m.
+        dt_s: the time one `step()` advances, s.
+    """
+
+    name: str
+    walls: np.ndarray
+    bounds: tuple[float, float, float, float]
+    dt_s: float
+
+    def reset(self, seed: int | None) -> CrowdState:
+        """Start a new episode; the same seed gives the same crowd."""
+
+    def step(self) -> CrowdState:
+        """Advance `dt_s` seconds and return the new state."""
+
+    def set_robot(self, pos: np.ndarray, vel: np.ndarray, radius_m: float) -> None:
+        """Place the robot (pos (2,) m, vel (2,) m/s) for the next step."""
+
+    def clear_robot(self) -> None:
+        """Remove the robot from the crowd's world."""
+
+    def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """A start (2,) and a goal (2,) across the scene for the robot, m."""
+
+
+class SimCrowd:
+    """`crowdsim.CrowdSimulator` stepped at the env's time step (`config.record_dt_s`)."""
+
+    def __init__(self, config: SimConfig, route_margin_m: float = 1.5) -> None:
+        self.sim = CrowdSimulator(config)
+        self.name = config.scenario
+        self.walls = np.asarray(self.sim.scenario.walls, dtype=float).reshape(-1, 2, 2)
+        self.bounds = tuple(float(b) for b in self.sim.scenario.bounds)
+        self.dt_s = config.record_dt_s
+        self.route_margin_m = route_margin_m
+
+    def reset(self, seed: int | None) -> CrowdState:
+        return self.sim.reset(seed)
+
+    def step(self) -> CrowdState:
+        return self.sim.step()
+
+    def set_robot(self, pos: np.ndarray, vel: np.ndarray, radius_m: float) -> None:
+        self.sim.set_robot(pos, vel, radius_m)
+
+    def clear_robot(self) -> None:
+        self.sim.clear_robot()
+
+    def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Circle crossing: opposite points of the circle (CrowdNav's convention). Other scenes: opposite
+        sides of the bounds along their longer axis, `route_margin_m` inside, with a random lateral
+        offset over the middle half."""
+        if self.name == "circle_crossing":
+            r = float(dict(self.sim.scenario.options).get("radius_m", 6.0))
+            a = rng.uniform(0.0, 2.0 * np.pi)
+            start = r * np.array([np.cos(a), np.sin(a)])
+            return start, -start
+        x0, y0, x1, y1 = self.bounds
+        m = self.route_margin_m
+        long_x = (x1 - x0) >= (y1 - y0)
+        lo, hi = (y0, y1) if long_x else (x0, x1)
+        mid, quarter = 0.5 * (lo + hi), 0.25 * (hi - lo)
+        a, b = rng.uniform(mid - quarter, mid + quarter, 2)
+        if long_x:
+            start, goal = np.array([x0 + m, a]), np.array([x1 - m, b])
+        else:
+            start, goal = np.array([a, y0 + m]), np.array([b, y1 - m])
+        return (start, goal) if rng.uniform() < 0.5 else (goal, start)

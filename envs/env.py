@@ -1,0 +1,307 @@
+"""`CrowdNavEnv`: a robot crossing a grouped crowd, Gymnasium API (registered as `crowdnav/CrowdNav-v0`).
+
+`step(action)` runs a fixed sequence:
+    1. apply action: scale [-1, 1]^2 to the robot's limits, clip to the reachable accelerations, integrate
+       the robot with the planner's dynamics;
+    2. simulate: the crowd advances dt_s with the robot moving along that step (visible or not);
+    3. observe: (on each 0.4 s tick) record the pedestrians' history, predict if configured; build the
+       observation;
+    4. rewards: named terms (`envs.rewards`), weighted by config;
+    5. terminated: success or collision;
+    6. truncated: the time limit;
+    7. info: the weighted reward terms, distances, and at the episode's end `is_success` and the metrics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from envs.crowd import Crowd, SimCrowd
+from envs.frame import SceneFrame
+from envs.geometry import intruded_groups, point_segment_distances, swept_distances
+from envs.history import PedHistory
+from envs.metrics import EpisodeMetrics
+from envs.observation import build_observation, observation_space
+from envs.rewards import StepFacts, reward_terms, weighted
+from planner import clip_control, model_dims, step_robot
+
+
+@dataclass(frozen=True)
+class Pedestrians:
+    """The pedestrians in the scene now: pos (N, 2) m, vel (N, 2) m/s, radius (N,) m, group_id (N,)
+    ground truth 0..G-1, ped_id (N,)."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    radius: np.ndarray
+    group_id: np.ndarray
+    ped_id: np.ndarray
+
+
+def make_crowd(cfg: CrowdNavConfig) -> Crowd:
+    """The crowd source for a config: the simulator, or a replayed file for scenario 'replay'."""
+    if cfg.scenario == REPLAY_SCENARIO:
+        from envs.replay import ReplayCrowd
+
+        return ReplayCrowd(replace(cfg.replay, dt_s=cfg.dt_s))
+    return SimCrowd(cfg.sim_config())
+
+
+class CrowdNavEnv(gym.Env):
+    """See the module docstring; observation layout in `envs.observation`, rewards in `envs.rewards`.
+
+    Actions outside [-1, 1]^2 are clipped to it; an action with NaN or inf, or of the wrong shape, raises
+    a ValueError. Unicycle: a[0] maps linearly to speed [-min_speed, max_speed] m/s and a[1] to yaw rate
+    [-max, max] rad/s; holonomic: a * max_speed (vx, vy) m/s, norm-clipped.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, config: CrowdNavConfig | None = None, render_mode: str | None = None,
+                 **overrides: Any) -> None:
+        cfg = config or CrowdNavConfig()
+        self.config = replace(cfg, **overrides) if overrides else cfg
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode {render_mode!r}; valid: {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.config.dt_s)}
+        self.crowd = make_crowd(self.config)
+        self.dims = model_dims(self.config.robot.model)
+        self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.observation_space = observation_space(self.config)
+        self.history = PedHistory()
+        self._predictor = None
+        self._pred_rng = np.random.default_rng(0)
+        self.robot_state = np.zeros(self.dims.state_dim)
+        self.goal = np.zeros(2)
+        self.steps = 0
+        self._sim_steps = 0
+        self.metrics = EpisodeMetrics()
+        self._done = True
+        self._annotations: dict[str, np.ndarray | None] = {}
+        self._pred_samples: np.ndarray | None = None
+        self._pred_groups: np.ndarray | None = None
+
+    # ------------------------------------------------------------------------------------------ API
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        super().reset(seed=seed)
+        cfg = self.config
+        state = self.crowd.reset(int(self.np_random.integers(2**31 - 1)))
+        self._pred_rng = np.random.default_rng(int(self.np_random.integers(2**31 - 1)))
+        self.crowd.clear_robot()
+        self.history.clear()
+        self.steps = self._sim_steps = 0
+        self._state = state
+        self._record_tick()
+        tick = cfg.ticks_per_prediction_step
+        for _ in range(tick * round(cfg.warmup_s / (tick * cfg.dt_s))):
+            self._state = self.crowd.step()
+            self._sim_steps += 1
+            if self._sim_steps % tick == 0:
+                self._record_tick()
+        start, self.goal = self._choose_route()
+        self.robot_state = np.zeros(self.dims.state_dim)
+        self.robot_state[:2] = start
+        if cfg.robot.model == "unicycle":
+            self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
+        self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
+        self.metrics = EpisodeMetrics()
+        self._done = False
+        self._annotations = {}
+        self._update_prediction()
+        return self._observe(), {"goal_distance_m": self._goal_distance()}
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        if self._done:
+            raise RuntimeError("step() called on a finished episode; call reset()")
+        cfg = self.config
+        # 1. apply action
+        control = self.action_to_control(action)
+        before_pos, before = self.robot_state[:2].copy(), self._active()
+        dist_before = self._goal_distance()
+        self.robot_state = step_robot(self.robot_state, control, cfg.dt_s, cfg.robot.model)
+        # 2. simulate (the robot body moves along the step's chord)
+        self.crowd.set_robot(before_pos, (self.robot_state[:2] - before_pos) / cfg.dt_s, cfg.robot.radius_m)
+        self._state = self.crowd.step()
+        self._sim_steps += 1
+        self.steps += 1
+        # 3. observe
+        if self.is_planning_tick:
+            self._record_tick()
+            self._update_prediction()
+        obs = self._observe()
+        # 4. rewards
+        facts = self._facts(before_pos, before, dist_before)
+        terms = weighted(reward_terms(facts, cfg), cfg)
+        self.metrics.update(cfg.dt_s, float(np.linalg.norm(self.robot_state[:2] - before_pos)),
+                            facts.min_surface_distance_m, cfg.discomfort_distance_m, facts.intruding)
+        # 5. terminated, 6. truncated
+        terminated = facts.collided or facts.reached_goal
+        truncated = (not terminated) and self.steps >= cfg.max_steps
+        # 7. info
+        info = {"reward_terms": terms, "goal_distance_m": facts.goal_distance_after_m,
+                "min_surface_distance_m": facts.min_surface_distance_m, "intruding": facts.intruding}
+        if terminated or truncated:
+            self._finish(facts, truncated)
+            info["is_success"] = self.metrics.success
+            info["episode_metrics"] = self.metrics.as_dict()
+        return obs, float(sum(terms.values())), bool(terminated), bool(truncated), info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from envs.render import render_rgb
+
+        return render_rgb(self.frame())
+
+    # ------------------------------------------------------------------ used by policies and observers
+    @property
+    def is_planning_tick(self) -> bool:
+        """Whether now is on the 0.4 s grid of the predictor (history and predictions are fresh)."""
+        return self._sim_steps % self.config.ticks_per_prediction_step == 0
+
+    def pedestrians(self) -> Pedestrians:
+        """The pedestrians in the scene now (rows in slot order)."""
+        s = self._state
+        act = s.active
+        return Pedestrians(s.pos[act], s.vel[act], s.radius[act], s.group_id[act], s.ped_id[act])
+
+    def history_window(self) -> np.ndarray:
+        """(8, N, 2) m positions at 0.4 s steps of `pedestrians()`, last row = now; only on a tick."""
+        if not self.is_planning_tick:
+            raise RuntimeError("history_window() is defined on 0.4 s ticks only (see is_planning_tick)")
+        return self.history.window(self.pedestrians().ped_id)
+
+    def action_to_control(self, action: np.ndarray) -> np.ndarray:
+        """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped
+        to the robot's velocity and acceleration limits over dt_s."""
+        a = np.asarray(action, dtype=float)
+        if a.shape != (2,):
+            raise ValueError(f"action must have shape (2,), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite, got {a}")
+        a = np.clip(a, -1.0, 1.0)
+        r = self.config.robot
+        if r.model == "unicycle":
+            lo, hi = -r.min_speed_mps, r.max_speed_mps
+            u = np.array([lo + (a[0] + 1.0) * 0.5 * (hi - lo), a[1] * r.max_yaw_rate_radps])
+        else:
+            u = a * r.max_speed_mps
+        return clip_control(self.robot_state, u, self.config.dt_s, r)
+
+    def control_to_action(self, control: np.ndarray) -> np.ndarray:
+        """The action (2,) float32 in [-1, 1] that asks for `control` (inverse of the scaling above)."""
+        u, r = np.asarray(control, float), self.config.robot
+        if r.model == "unicycle":
+            lo, hi = -r.min_speed_mps, r.max_speed_mps
+            a = np.array([2.0 * (u[0] - lo) / (hi - lo) - 1.0, u[1] / r.max_yaw_rate_radps])
+        else:
+            a = u / r.max_speed_mps
+        return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+    def annotate(self, plan: np.ndarray | None = None, predictions: np.ndarray | None = None,
+                 predicted_group_id: np.ndarray | None = None) -> None:
+        """Attach a policy's plan (H + 1, 2) and predictions (K, T, N, 2) / groups (N,) (rows of
+        `pedestrians()`) to the frames drawn from now on."""
+        self._annotations = {"plan": plan, "predictions": predictions, "predicted_group_id": predicted_group_id}
+
+    def frame(self, scalars: dict[str, float] | None = None) -> SceneFrame:
+        """The current scene for the renderer and the rerun observer."""
+        p = self.pedestrians()
+        ann = self._annotations
+        preds, pgroups = ann.get("predictions"), ann.get("predicted_group_id")
+        if preds is None and self._pred_samples is not None and self._pred_samples.shape[2] == len(p.pos):
+            preds, pgroups = self._pred_samples, self._pred_groups
+        ok = preds is not None and preds.shape[2] == len(p.pos)
+        return SceneFrame(
+            step=self.steps, time_s=self.steps * self.config.dt_s, robot_state=self.robot_state.copy(),
+            robot_radius_m=self.config.robot.radius_m, goal=self.goal.copy(), ped_pos=p.pos, ped_vel=p.vel,
+            ped_radius=p.radius, group_id=p.group_id, ped_id=p.ped_id, walls=self.crowd.walls,
+            bounds=self.crowd.bounds, plan=ann.get("plan"), predictions=preds if ok else None,
+            predicted_group_id=pgroups if ok else None, scalars=dict(scalars or {}),
+        )
+
+    # ---------------------------------------------------------------------------------- internals
+    def _active(self) -> tuple[np.ndarray, np.ndarray]:
+        s = self._state
+        return s.ped_id[s.active], s.pos[s.active]
+
+    def _record_tick(self) -> None:
+        ids, pos = self._active()
+        self.history.record(ids, pos)
+
+    def _goal_distance(self) -> float:
+        return float(np.linalg.norm(self.goal - self.robot_state[:2]))
+
+    def _choose_route(self) -> tuple[np.ndarray, np.ndarray]:
+        """A route whose start is clear of every pedestrian by start_clearance_m (the last draw otherwise)."""
+        p = self.pedestrians()
+        need = self.config.robot.radius_m + self.config.start_clearance_m
+        for _ in range(50):
+            start, goal = self.crowd.robot_route(self.np_random)
+            if len(p.pos) == 0 or np.min(np.linalg.norm(p.pos - start, axis=1) - p.radius) >= need:
+                break
+        return np.asarray(start, float), np.asarray(goal, float)
+
+    def _update_prediction(self) -> None:
+        if not self.config.observation.needs_predictor:
+            return
+        if self._predictor is None:
+            from predictor import load_predictor  # lazy: torch only when predictions are observed
+
+            self._predictor = load_predictor(self.config.observation.predictor)
+        hist = self.history_window()
+        if hist.shape[1] == 0:
+            self._pred_samples, self._pred_groups = np.zeros((1, 12, 0, 2)), np.zeros(0, np.int64)
+            return
+        k = self.config.observation.n_prediction_samples
+        pred = self._predictor.predict(hist, n_samples=k, rng=self._pred_rng)
+        self._pred_samples, self._pred_groups = pred.samples, pred.group_id
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        cfg, p = self.config, self.pedestrians()
+        groups, samples = p.group_id, None
+        if cfg.observation.needs_predictor and self._pred_samples is not None \
+                and self._pred_samples.shape[2] == len(p.pos):  # rows change only between ticks
+            samples = self._pred_samples
+            if cfg.observation.group_source == "predicted":
+                groups = self._pred_groups
+        time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
+        return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
+                                 p.pos, p.vel, p.radius, groups, samples)
+
+    def _facts(self, before_pos: np.ndarray, before: tuple[np.ndarray, np.ndarray], dist_before: float) -> StepFacts:
+        cfg, p = self.config, self.pedestrians()
+        here, r = self.robot_state[:2], cfg.robot.radius_m
+        centre = np.hypot(*(p.pos - here).T)
+        surface = centre - p.radius - r
+        ids0, pos0 = before
+        common, i0, i1 = np.intersect1d(ids0, p.ped_id, assume_unique=True, return_indices=True)
+        if len(common):  # pedestrians present before and after: closest approach along the step
+            swept = swept_distances(before_pos, here, pos0[i0], p.pos[i1]) - p.radius[i1] - r
+            surface[i1] = np.minimum(surface[i1], swept)
+        min_surface = float(surface.min()) if len(surface) else float("inf")
+        wall_hit = bool(len(self.crowd.walls)) and float(point_segment_distances(here, self.crowd.walls).min()) < r
+        intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
+                                         cfg.group_span_m, centre))
+        dist_after = self._goal_distance()
+        self._wall_hit = wall_hit
+        return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m,
+                         min_surface < 0.0 or wall_hit, min_surface, intruding)
+
+    def _finish(self, facts: StepFacts, truncated: bool) -> None:
+        m = self.metrics
+        if facts.collided:
+            m.collision = True
+            m.collision_with = "wall" if self._wall_hit and facts.min_surface_distance_m >= 0 else "pedestrian"
+        elif facts.reached_goal:
+            m.success, m.time_to_goal_s = True, m.time_s
+        elif truncated:
+            m.timeout = True
+        self._done = True

@@ -1,0 +1,51 @@
+"""Pedestrian position history at the predictor's 0.4 s step, keyed by pedestrian identity."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+OBS_LEN = 8  # observed steps the predictor takes
+
+
+class PedHistory:
+    """The last `length` snapshots (ped ids (n,), positions (n, 2) m), one per 0.4 s tick."""
+
+    def __init__(self, length: int = OBS_LEN) -> None:
+        self.length = length
+        self._snaps: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=length)
+
+    def clear(self) -> None:
+        self._snaps.clear()
+
+    def __len__(self) -> int:
+        return len(self._snaps)
+
+    def record(self, ped_id: np.ndarray, pos: np.ndarray) -> None:
+        """Add a snapshot: ids (n,) int and positions (n, 2) m of the pedestrians in the scene."""
+        order = np.argsort(ped_id, kind="stable")
+        self._snaps.append((np.asarray(ped_id)[order].copy(), np.asarray(pos, float)[order].copy()))
+
+    def window(self, ped_id: np.ndarray) -> np.ndarray:
+        """(length, n, 2) m history of pedestrians ped_id (n,), oldest first; the last row is the newest
+        snapshot, which must contain every requested id. A pedestrian seen for fewer ticks is padded
+        backwards with its earliest known position (standing still), so the array is always finite."""
+        if not self._snaps:
+            raise RuntimeError("no snapshot recorded yet")
+        ped_id = np.asarray(ped_id)
+        out = np.empty((self.length, len(ped_id), 2))
+        snaps = list(self._snaps)
+        row = self.length - 1
+        for ids, pos in reversed(snaps):
+            loc = np.clip(np.searchsorted(ids, ped_id), 0, max(len(ids) - 1, 0))
+            found = (ids[loc] == ped_id) if len(ids) else np.zeros(len(ped_id), bool)
+            if row == self.length - 1:
+                if not found.all():
+                    raise KeyError(f"pedestrians {ped_id[~found].tolist()} are not in the newest snapshot")
+                out[row] = pos[loc]
+            else:  # not seen at this tick: keep the next newer position
+                out[row] = np.where(found[:, None], pos[loc] if len(ids) else 0.0, out[row + 1])
+            row -= 1
+        out[: row + 1] = out[row + 1]
+        return out

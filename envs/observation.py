@@ -1,0 +1,98 @@
+"""The observation: a flat Dict of float32 Boxes with finite bounds (SB3's MultiInputPolicy accepts it).
+
+Keys (P = max_pedestrians, K = n_prediction_samples):
+    robot (7,): goal position in the robot frame (x ahead, y left) m (2), goal distance m, velocity
+        (unicycle: forward speed m/s and yaw rate rad/s; holonomic: vx, vy in the robot's world-aligned
+        frame, m/s), robot radius m, fraction of the time limit left.
+    pedestrians (P, 5): the nearest observed pedestrians, nearest first: position relative to the robot
+        in the robot frame m (2), velocity in the robot frame m/s (2), body radius m. Padding rows are 0.
+    pedestrian_mask (P,): 1 for a real row, 0 for padding.
+    group_ids (P,): group ids renumbered 0..G-1 in order of first appearance among the rows (truth or
+        predicted, by config); -1 for padding.
+    predictions (K, 12, P, 2), only if configured: sampled futures at +0.4 ... +4.8 s relative to the
+        robot, in the robot frame, m; padding rows are 0.
+Every value is clipped to its Box, so nothing is ever out of bounds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from envs.config import CrowdNavConfig
+
+PRED_LEN = 12
+
+
+def observation_space(cfg: CrowdNavConfig) -> spaces.Dict:
+    obs, p = cfg.observation, cfg.observation.max_pedestrians
+    pb, vb = obs.position_bound_m, obs.speed_bound_mps
+    robot_hi = np.array([pb, pb, pb, vb, max(vb, cfg.robot.max_yaw_rate_radps), 5.0, 1.0], np.float32)
+    robot_lo = -robot_hi
+    robot_lo[[2, 5, 6]] = 0.0
+    ped_hi = np.broadcast_to(np.array([pb, pb, vb, vb, 5.0], np.float32), (p, 5))
+    ped_lo = ped_hi * np.array([-1, -1, -1, -1, 0], np.float32)
+    items = {
+        "robot": spaces.Box(robot_lo, robot_hi, dtype=np.float32),
+        "pedestrians": spaces.Box(ped_lo, ped_hi.copy(), dtype=np.float32),
+        "pedestrian_mask": spaces.Box(0.0, 1.0, (p,), np.float32),
+        "group_ids": spaces.Box(-1.0, float(p - 1), (p,), np.float32),
+    }
+    if obs.predictions:
+        items["predictions"] = spaces.Box(-pb, pb, (obs.n_prediction_samples, PRED_LEN, p, 2), np.float32)
+    return spaces.Dict(items)
+
+
+def rotation(heading: float) -> np.ndarray:
+    """(2, 2) matrix taking world vectors into the frame of a robot with this heading (rad)."""
+    c, s = np.cos(heading), np.sin(heading)
+    return np.array([[c, s], [-s, c]])
+
+
+def dense_in_order(ids: np.ndarray) -> np.ndarray:
+    """Renumber ids (n,) 0..G-1 in order of first appearance."""
+    _, first, inverse = np.unique(ids, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[inverse]
+
+
+def nearest_rows(robot_pos: np.ndarray, pos: np.ndarray, cfg: CrowdNavConfig) -> np.ndarray:
+    """Indices into pos (n, 2) of the observed pedestrians: within the sensor range, nearest first, at most P."""
+    dist = np.linalg.norm(pos - robot_pos, axis=1)
+    order = np.argsort(dist, kind="stable")
+    order = order[dist[order] <= cfg.observation.sensor_range_m]
+    return order[: cfg.observation.max_pedestrians]
+
+
+def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.ndarray, goal: np.ndarray,
+                      time_left: float, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray,
+                      group_id: np.ndarray, samples: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The observation dict from the robot state (state_dim,), goal (2,), time left as a fraction, the
+    pedestrians pos/vel (n, 2), radius (n,), group ids (n,), and predicted samples (K, 12, n, 2) or None."""
+    p = cfg.observation.max_pedestrians
+    unicycle = cfg.robot.model == "unicycle"
+    rot = rotation(float(robot_state[2])) if unicycle else np.eye(2)
+    here = robot_state[:2]
+    goal_rel = rot @ (goal - here)
+    robot_vel = robot_state[3:5] if unicycle else robot_state[2:4]
+    robot = np.array([goal_rel[0], goal_rel[1], np.linalg.norm(goal - here), robot_vel[0], robot_vel[1],
+                      cfg.robot.radius_m, time_left])
+    rows = nearest_rows(here, pos, cfg)
+    n = len(rows)
+    peds = np.zeros((p, 5))
+    peds[:n, :2] = (pos[rows] - here) @ rot.T
+    peds[:n, 2:4] = vel[rows] @ rot.T
+    peds[:n, 4] = radius[rows]
+    mask = np.zeros(p)
+    mask[:n] = 1.0
+    groups = np.full(p, -1.0)
+    groups[:n] = dense_in_order(group_id[rows])
+    out = {"robot": robot, "pedestrians": peds, "pedestrian_mask": mask, "group_ids": groups}
+    if "predictions" in space.spaces:
+        k = cfg.observation.n_prediction_samples
+        pred = np.zeros((k, PRED_LEN, p, 2))
+        if samples is not None and n:
+            pred[:, :, :n] = (samples[:k, :, rows] - here) @ rot.T
+        out["predictions"] = pred
+    return {key: np.clip(val, space[key].low, space[key].high).astype(np.float32) for key, val in out.items()}

@@ -1,0 +1,373 @@
+"""`ReplayCrowd`: pedestrians replayed from an ETH/UCY-format recording, behind the env's `Crowd` protocol.
+
+The pedestrians are non-reactive: they follow their recorded tracks whatever the robot does. Positions at env
+times are linearly interpolated between a pedestrian's annotated frames, and its velocity is the slope of the
+segment it is on, so the two are consistent. A pedestrian is in the scene from its first to its last annotated
+time (gaps inside a track are bridged by the interpolation). When the recording ends the crowd empties; the
+env's time limit ends the episode (`finished` tells when no pedestrian will appear again).
+
+Times: the recording's time 0 is its first frame id; one annotation step (the most common positive difference
+of consecutive distinct frame ids, unless given) lasts `frame_step_s`. The episode starts at `start_time_s` of
+the recording, fixed or drawn at `reset`; `CrowdState.time_s` counts from the episode start.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from crowdsim.state import CrowdState
+
+START_MODES = ("random", "fixed")
+_SNAP = 1e-9  # times within this many annotation steps of a whole step are snapped onto it
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """How to replay a recording.
+
+    Attributes:
+        path: trajectory file, rows `frame ped x y` (m), tab- or whitespace-separated.
+        groups_path: optional group file, one group per line (ped ids separated by whitespace); a pedestrian
+            not listed is its own group. None: every pedestrian is alone.
+        frame_step_s: seconds per annotation step (0.4 s: the benchmark convention; about 0.667 s in biwi_eth).
+        frame_increment: frame-id increment per annotation step; None infers it from the file.
+        dt_s: time one env step advances, s.
+        ped_radius_m: body radius given to every pedestrian, m.
+        route_margin_m: inset of the robot's start and goal from the trajectories' bounding box, m.
+        route_clearance_m: a robot start counts as free when every pedestrian's centre is farther than
+            `ped_radius_m + route_clearance_m` from it, m.
+        route_tries: draws of the robot route before settling for the one with the most clearance.
+        bounds_margin_m: margin added around the trajectories (and walls) to make `bounds`, m.
+        start_mode: "random": each episode starts at a time drawn uniformly from
+            [start_time_s, duration_s - min_remaining_s] with `np.random.default_rng(seed)`; "fixed": at
+            `start_time_s`.
+        start_time_s: fixed start, or earliest random start, s of recording time.
+        min_remaining_s: recording time a random start leaves before the end (clipped to what exists), s.
+        capacity: rows of the state arrays; None: the most pedestrians ever in the scene at once.
+        walls: wall segments ((x0, y0), (x1, y1)) in m; none by default.
+        name: scenario name; None: the trajectory file's stem.
+    """
+
+    path: Path | str
+    groups_path: Path | str | None = None
+    frame_step_s: float = 0.4
+    frame_increment: float | None = None
+    dt_s: float = 0.1
+    ped_radius_m: float = 0.25
+    route_margin_m: float = 1.5
+    route_clearance_m: float = 0.5
+    route_tries: int = 10
+    bounds_margin_m: float = 1.0
+    start_mode: str = "random"
+    start_time_s: float = 0.0
+    min_remaining_s: float = 0.0
+    capacity: int | None = None
+    walls: Sequence = ()
+    name: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "path", Path(self.path))
+        if self.groups_path is not None:
+            object.__setattr__(self, "groups_path", Path(self.groups_path))
+        for key in ("frame_step_s", "dt_s", "ped_radius_m"):
+            _check(math.isfinite(getattr(self, key)) and getattr(self, key) > 0, f"{key} must be > 0")
+        for key in ("route_margin_m", "route_clearance_m", "bounds_margin_m", "start_time_s", "min_remaining_s"):
+            _check(math.isfinite(getattr(self, key)) and getattr(self, key) >= 0, f"{key} must be >= 0")
+        inc = self.frame_increment
+        _check(inc is None or (math.isfinite(inc) and inc > 0), "frame_increment must be > 0 or None")
+        _check(self.route_tries >= 1, "route_tries must be >= 1")
+        _check(self.start_mode in START_MODES, f"start_mode must be one of {START_MODES}")
+        _check(self.capacity is None or self.capacity >= 1, "capacity must be >= 1 or None")
+        walls = np.asarray(self.walls, dtype=float)
+        _check(walls.size == 0 or (walls.ndim == 3 and walls.shape[1:] == (2, 2)), "walls must be (W, 2, 2)")
+        _check(bool(np.all(np.isfinite(walls))), "walls must be finite")
+        object.__setattr__(self, "walls", tuple(tuple(map(tuple, w)) for w in walls.reshape(-1, 2, 2).tolist()))
+
+    @property
+    def walls_array(self) -> np.ndarray:
+        """(W, 2, 2) wall segments, m."""
+        return np.asarray(self.walls, dtype=float).reshape(-1, 2, 2)
+
+
+def _check(ok: bool, message: str) -> None:
+    if not ok:
+        raise ValueError(message)
+
+
+def _snap(u: float) -> float:
+    """u (annotation steps) snapped onto the nearest whole step when within `_SNAP` of it."""
+    return float(round(u)) if abs(u - round(u)) < _SNAP else u
+
+
+def read_trajectories(path: Path | str) -> np.ndarray:
+    """Read an ETH/UCY-format file into an (R, 4) float array of rows (frame, ped, x, y), file order.
+
+    Blank lines are skipped. A row without exactly 4 numbers, with a non-finite value, with a ped id that is not
+    a whole number, or repeating a (frame, ped) pair raises ValueError naming `path:line` (1-based).
+    """
+    path = Path(path)
+    rows: list[tuple[float, ...]] = []
+    seen: set[tuple[float, float]] = set()
+    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        tokens = line.split()
+        if not tokens:
+            continue
+        where = f"{path}:{lineno}"
+        if len(tokens) != 4:
+            raise ValueError(f"{where}: expected 4 columns (frame ped x y), got {len(tokens)}: {line!r}")
+        try:
+            row = tuple(float(tok) for tok in tokens)
+        except ValueError as exc:
+            raise ValueError(f"{where}: non-numeric value in {line!r}") from exc
+        if not all(math.isfinite(v) for v in row):
+            raise ValueError(f"{where}: non-finite value in {line!r}")
+        if row[1] != round(row[1]):
+            raise ValueError(f"{where}: pedestrian id {tokens[1]!r} is not a whole number")
+        if row[:2] in seen:
+            raise ValueError(f"{where}: pedestrian {int(row[1])} appears twice in frame {tokens[0]}")
+        seen.add(row[:2])
+        rows.append(row)
+    if not rows:
+        raise ValueError(f"{path}: no trajectory rows (empty file)")
+    return np.array(rows, dtype=float)
+
+
+def read_groups(path: Path | str) -> list[list[int]]:
+    """Read a group file: one group per line, whole-number ped ids separated by whitespace; blank lines skipped.
+
+    A non-numeric or fractional id, or a pedestrian listed twice, raises ValueError naming `path:line`.
+    """
+    path = Path(path)
+    groups: list[list[int]] = []
+    seen: set[int] = set()
+    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            values = [float(tok) for tok in line.split()]
+        except ValueError as exc:
+            raise ValueError(f"{path}:{lineno}: malformed group line {line!r}") from exc
+        if not all(math.isfinite(v) and v == round(v) for v in values):
+            raise ValueError(f"{path}:{lineno}: group ids must be whole numbers: {line!r}")
+        ids = [int(v) for v in values]
+        repeated = (set(ids) & seen) or (len(set(ids)) < len(ids))
+        if repeated:
+            raise ValueError(f"{path}:{lineno}: a pedestrian is listed in more than one group: {line!r}")
+        seen.update(ids)
+        groups.append(ids)
+    return groups
+
+
+def infer_frame_increment(frames: np.ndarray) -> float:
+    """The most common positive difference of consecutive distinct frame ids (ties: the smallest); 1 when the
+    file has a single frame."""
+    diffs = np.round(np.diff(np.unique(frames)), 9)
+    if diffs.size == 0:
+        return 1.0
+    values, counts = np.unique(diffs, return_counts=True)
+    return float(values[np.argmax(counts)])
+
+
+def assign_slots(first: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """Rows for pedestrians present over the closed intervals [first, last] (P,), so that no two present at the
+    same time share a row: greedy colouring by start time, which uses as many rows as the most pedestrians
+    present at once (the number of rows is `slots.max() + 1`)."""
+    slots = np.empty(len(first), np.int64)
+    free_at: list[float] = []  # per row, the time its last pedestrian leaves
+    for p in np.lexsort((last, first)):
+        row = next((r for r, t in enumerate(free_at) if t < first[p]), len(free_at))
+        if row == len(free_at):
+            free_at.append(0.0)
+        free_at[row] = last[p]
+        slots[p] = row
+    return slots
+
+
+class ReplayCrowd:
+    """Pedestrians replayed from a recording (see the module docstring); satisfies `envs.crowd.Crowd`.
+
+    Attributes:
+        config: the `ReplayConfig`.
+        name: scenario name.
+        walls: (W, 2, 2) wall segments, m (empty (0, 2, 2) unless configured).
+        bounds: (x_min, y_min, x_max, y_max): the trajectories' (and walls') bounding box plus the margin, m.
+        dt_s: time one `step()` advances, s.
+        capacity: rows of the state arrays.
+        ped_ids: (P,) int file ids of all pedestrians, ascending.
+        duration_s: recording time from the first to the last annotated frame, s.
+        start_time_s: recording time at which the current episode started, s.
+        robot: (pos (2,) m, vel (2,) m/s, radius m) last given by `set_robot`, or None; it moves nobody.
+    """
+
+    def __init__(self, config: ReplayConfig) -> None:
+        self.config = config
+        self.name = config.name or config.path.stem
+        self.dt_s = config.dt_s
+        self.walls = config.walls_array
+        self._load_tracks(read_trajectories(config.path))
+        self._load_groups()
+        self.bounds = self._bounds()
+        self.duration_s = float(self._last.max()) * config.frame_step_s
+        needed = int(self._slot.max()) + 1
+        if config.capacity is not None and config.capacity < needed:
+            raise ValueError(f"capacity {config.capacity} < {needed} pedestrians present at once in {config.path}")
+        self.capacity = config.capacity or needed
+        if config.start_time_s > self.duration_s:
+            raise ValueError(f"start_time_s {config.start_time_s} is past the recording's end ({self.duration_s} s)")
+        self.robot: tuple[np.ndarray, np.ndarray, float] | None = None
+        self.start_time_s = config.start_time_s
+        self._step = 0
+        self._state = self._make_state()
+
+    # ----- loading -----
+    def _load_tracks(self, rows: np.ndarray) -> None:
+        """Per pedestrian (ascending id): knot times u (annotation steps from the first frame) and positions."""
+        inc = self.config.frame_increment or infer_frame_increment(rows[:, 0])
+        rows = rows[np.lexsort((rows[:, 0], rows[:, 1]))]
+        ids, starts = np.unique(rows[:, 1], return_index=True)
+        self.ped_ids = ids.astype(np.int64)
+        u = (rows[:, 0] - rows[:, 0].min()) / inc
+        self._u = np.split(u, starts[1:])
+        self._xy = np.split(rows[:, 2:4], starts[1:])
+        self._first = np.array([k[0] for k in self._u])
+        self._last = np.array([k[-1] for k in self._u])
+        self._goal = np.array([p[-1] for p in self._xy])
+        self._slot = assign_slots(self._first, self._last)
+        self._all_xy = rows[:, 2:4]
+
+    def _load_groups(self) -> None:
+        """Global group label per pedestrian: the group file's line order, then one label per lone pedestrian."""
+        label = np.full(len(self.ped_ids), -1, np.int64)
+        index = {int(p): i for i, p in enumerate(self.ped_ids)}
+        path = self.config.groups_path
+        for g, members in enumerate(read_groups(path) if path is not None else []):
+            label[[index[m] for m in members if m in index]] = g
+        lone = label < 0
+        label[lone] = label.max(initial=-1) + 1 + np.arange(int(lone.sum()))
+        self._label = label
+
+    def _bounds(self) -> tuple[float, float, float, float]:
+        pts = np.concatenate([self._all_xy, self.walls.reshape(-1, 2)])
+        m = self.config.bounds_margin_m
+        lo, hi = pts.min(axis=0) - m, pts.max(axis=0) + m
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+    # ----- time -----
+    @property
+    def recording_time_s(self) -> float:
+        """Recording time of the current state, s."""
+        return self.start_time_s + self._step * self.dt_s
+
+    @property
+    def finished(self) -> bool:
+        """True once the recording has ended: no pedestrian is or will be in the scene."""
+        return self._u_now() > self._last.max()
+
+    def _u_now(self) -> float:
+        """Current time in annotation steps from the first frame."""
+        cfg = self.config
+        return _snap(self.start_time_s / cfg.frame_step_s + self._step * (cfg.dt_s / cfg.frame_step_s))
+
+    # ----- Crowd protocol -----
+    def reset(self, seed: int | None) -> CrowdState:
+        """Start an episode; "random" mode draws the start time with `np.random.default_rng(seed)`."""
+        cfg = self.config
+        if cfg.start_mode == "random":
+            hi = max(cfg.start_time_s, self.duration_s - cfg.min_remaining_s)
+            self.start_time_s = float(np.random.default_rng(seed).uniform(cfg.start_time_s, hi))
+        else:
+            self.start_time_s = cfg.start_time_s
+        self._step = 0
+        self._state = self._make_state()
+        return self._state
+
+    def step(self) -> CrowdState:
+        """Advance `dt_s` seconds along the recording and return the new state."""
+        self._step += 1
+        self._state = self._make_state()
+        return self._state
+
+    def state(self) -> CrowdState:
+        """The current state (as last returned by `reset` or `step`)."""
+        return self._state
+
+    def set_robot(self, pos: np.ndarray, vel: np.ndarray, radius_m: float) -> None:
+        """Record the robot (pos (2,) m, vel (2,) m/s, radius m); the replayed pedestrians ignore it."""
+        self.robot = (np.array(pos, dtype=float), np.array(vel, dtype=float), float(radius_m))
+
+    def clear_robot(self) -> None:
+        self.robot = None
+
+    def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """A start (2,) and goal (2,) in m on opposite sides of the trajectories' bounding box along its longer
+        axis, inset by `route_margin_m` (at most a quarter of that side), with lateral offsets drawn over the
+        middle half of the other side, in random order. Up to `route_tries` draws look for a start clear of the
+        pedestrians present now (call after `reset`); failing that, the draw with the most clearance is kept."""
+        cfg = self.config
+        best, best_gap = None, -np.inf
+        for _ in range(cfg.route_tries):
+            start, goal = self._draw_route(rng)
+            gap = self._clearance(start)
+            if gap > best_gap:
+                best, best_gap = (start, goal), gap
+            if gap > cfg.ped_radius_m + cfg.route_clearance_m:
+                break
+        return best
+
+    def _draw_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = self._all_xy.min(axis=0), self._all_xy.max(axis=0)
+        axis = 0 if (hi[0] - lo[0]) >= (hi[1] - lo[1]) else 1
+        inset = min(self.config.route_margin_m, 0.25 * (hi[axis] - lo[axis]))
+        mid, quarter = 0.5 * (lo[1 - axis] + hi[1 - axis]), 0.25 * (hi[1 - axis] - lo[1 - axis])
+        start, goal = np.empty(2), np.empty(2)
+        start[axis], goal[axis] = lo[axis] + inset, hi[axis] - inset
+        start[1 - axis], goal[1 - axis] = rng.uniform(mid - quarter, mid + quarter, 2)
+        return (start, goal) if rng.uniform() < 0.5 else (goal, start)
+
+    def _clearance(self, point: np.ndarray) -> float:
+        """Distance from point (2,) to the nearest pedestrian centre in the current state, m (inf if none)."""
+        pos = self._state.pos[self._state.active]
+        return float(np.linalg.norm(pos - point, axis=1).min()) if len(pos) else np.inf
+
+    # ----- state -----
+    def positions_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pedestrians present at recording time `time_s` (s): their ids (A,) (ascending), positions (A, 2) m
+        and velocities (A, 2) m/s, interpolated linearly between annotated frames."""
+        idx, pos, vel = self._interpolate(_snap(time_s / self.config.frame_step_s))
+        return self.ped_ids[idx], pos, vel
+
+    def _interpolate(self, u: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Indices (A,) into `ped_ids` of the pedestrians present at u (annotation steps from the first frame),
+        their positions (A, 2) m and velocities (A, 2) m/s."""
+        idx = np.flatnonzero((self._first <= u) & (u <= self._last))
+        pos, vel = np.zeros((len(idx), 2)), np.zeros((len(idx), 2))
+        for row, p in enumerate(idx):
+            knots, xy = self._u[p], self._xy[p]
+            if len(knots) == 1:
+                pos[row] = xy[0]
+                continue
+            i = min(int(np.searchsorted(knots, u, side="right")) - 1, len(knots) - 2)
+            w = (u - knots[i]) / (knots[i + 1] - knots[i])
+            pos[row] = (1.0 - w) * xy[i] + w * xy[i + 1]
+            vel[row] = (xy[i + 1] - xy[i]) / ((knots[i + 1] - knots[i]) * self.config.frame_step_s)
+        return idx, pos, vel
+
+    def _make_state(self) -> CrowdState:
+        c = self.capacity
+        idx, pos_a, vel_a = self._interpolate(self._u_now())
+        rows = self._slot[idx]
+        active = np.zeros(c, bool)
+        active[rows] = True
+        pos, vel, goal = (np.full((c, 2), np.nan) for _ in range(3))
+        pos[rows], vel[rows], goal[rows] = pos_a, vel_a, self._goal[idx]
+        radius = np.where(active, self.config.ped_radius_m, np.nan)
+        group, ped = np.full(c, -1, np.int64), np.full(c, -1, np.int64)
+        group[rows] = np.unique(self._label[idx], return_inverse=True)[1]
+        ped[rows] = self.ped_ids[idx]
+        return CrowdState(pos=pos, vel=vel, goal=goal, radius=radius, group_id=group, ped_id=ped,
+                          active=active, frame=self._step, time_s=self._step * self.dt_s)
