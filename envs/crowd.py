@@ -68,22 +68,45 @@ class SimCrowd:
         self.sim.clear_robot()
 
     def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Circle crossing: opposite points of the circle (CrowdNav's convention). Other scenes: opposite
-        sides of the bounds along their longer axis, `route_margin_m` inside, with a random lateral
-        offset over the middle half."""
-        if self.name == "circle_crossing":
-            r = float(dict(self.sim.scenario.options).get("radius_m", 6.0))
-            a = rng.uniform(0.0, 2.0 * np.pi)
-            start = r * np.array([np.cos(a), np.sin(a)])
-            return start, -start
-        x0, y0, x1, y1 = self.bounds
-        m = self.route_margin_m
-        long_x = (x1 - x0) >= (y1 - y0)
-        lo, hi = (y0, y1) if long_x else (x0, x1)
-        mid, quarter = 0.5 * (lo + hi), 0.25 * (hi - lo)
-        a, b = rng.uniform(mid - quarter, mid + quarter, 2)
-        if long_x:
-            start, goal = np.array([x0 + m, a]), np.array([x1 - m, b])
-        else:
-            start, goal = np.array([a, y0 + m]), np.array([b, y1 - m])
-        return (start, goal) if rng.uniform() < 0.5 else (goal, start)
+        """A start and a goal (2,) m for this scenario (see `ROUTES`; other scenarios: `side_to_side`)."""
+        return ROUTES.get(self.name, side_to_side)(self, rng)
+
+
+def circle_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Opposite points of the crossing circle (CrowdNav's circle crossing)."""
+    r = float(dict(crowd.sim.scenario.options).get("radius_m", 6.0))
+    a = rng.uniform(0.0, 2.0 * np.pi)
+    start = r * np.array([np.cos(a), np.sin(a)])
+    return start, -start
+
+
+def plaza_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Corner to opposite corner (3 m inside the walls, +-0.5 m jitter): the diagonal crosses every flow
+    between the four gates, and the start stays clear of the gates where groups enter."""
+    x0, y0, x1, y1 = crowd.bounds
+    inset = 3.0
+    lo, hi = np.array([x0 + inset, y0 + inset]), np.array([x1 - inset, y1 - inset])
+    corner = rng.integers(4)
+    cx, cy = corner % 2, corner // 2
+    start = np.array([(lo, hi)[cx][0], (lo, hi)[cy][1]]) + rng.uniform(-0.5, 0.5, 2)
+    goal = np.array([(hi, lo)[cx][0], (hi, lo)[cy][1]]) + rng.uniform(-0.5, 0.5, 2)
+    return start, goal
+
+
+def side_to_side(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Opposite sides of the bounds along the longer axis, `route_margin_m` inside, with a random lateral
+    offset over the middle half; random direction."""
+    x0, y0, x1, y1 = crowd.bounds
+    m = crowd.route_margin_m
+    long_x = (x1 - x0) >= (y1 - y0)
+    lo, hi = (y0, y1) if long_x else (x0, x1)
+    mid, quarter = 0.5 * (lo + hi), 0.25 * (hi - lo)
+    a, b = rng.uniform(mid - quarter, mid + quarter, 2)
+    if long_x:
+        start, goal = np.array([x0 + m, a]), np.array([x1 - m, b])
+    else:
+        start, goal = np.array([a, y0 + m]), np.array([b, y1 - m])
+    return (start, goal) if rng.uniform() < 0.5 else (goal, start)
+
+
+ROUTES = {"circle_crossing": circle_route, "plaza": plaza_route}
