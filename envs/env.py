@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from crowdsim import CrowdState
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
@@ -123,7 +124,7 @@ class CrowdNavEnv(gym.Env):
         cfg = self.config
         # 1. apply action
         control = self.action_to_control(action)
-        before_pos, before = self.robot_state[:2].copy(), self._active()
+        before_pos, before = self.robot_state[:2].copy(), self._state
         dist_before = self._goal_distance()
         self.robot_state = step_robot(self.robot_state, control, cfg.dt_s, cfg.robot.model)
         # 2. simulate (the robot body moves along the step's chord)
@@ -276,16 +277,18 @@ class CrowdNavEnv(gym.Env):
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
                                  p.pos, p.vel, p.radius, groups, samples)
 
-    def _facts(self, before_pos: np.ndarray, before: tuple[np.ndarray, np.ndarray], dist_before: float) -> StepFacts:
-        cfg, p = self.config, self.pedestrians()
+    def _facts(self, before_pos: np.ndarray, before: CrowdState, dist_before: float) -> StepFacts:
+        """Distances, contact and intrusion of the step just simulated (`before`: the crowd at its start)."""
+        cfg, p, s = self.config, self.pedestrians(), self._state
         here, r = self.robot_state[:2], cfg.robot.radius_m
         centre = np.hypot(*(p.pos - here).T)
         surface = centre - p.radius - r
-        ids0, pos0 = before
-        common, i0, i1 = np.intersect1d(ids0, p.ped_id, assume_unique=True, return_indices=True)
-        if len(common):  # pedestrians present before and after: closest approach along the step
-            swept = swept_distances(before_pos, here, pos0[i0], p.pos[i1]) - p.radius[i1] - r
-            surface[i1] = np.minimum(surface[i1], swept)
+        # rows keep their pedestrian while it stays: those present at both ends get the closest approach
+        both = (before.active & s.active & (before.ped_id == s.ped_id))[s.active]
+        if both.any():
+            rows = np.flatnonzero(s.active)[both]
+            swept = swept_distances(before_pos, here, before.pos[rows], s.pos[rows]) - s.radius[rows] - r
+            surface[both] = np.minimum(surface[both], swept)
         min_surface = float(surface.min()) if len(surface) else float("inf")
         wall_hit = bool(len(self.crowd.walls)) and float(point_segment_distances(here, self.crowd.walls).min()) < r
         intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,

@@ -205,15 +205,23 @@ def test_time_limit_truncates():
 
 
 def test_invisible_robot_does_not_change_the_crowd():
-    def crowd_after(action: float, visible: bool) -> np.ndarray:
+    def crowd_after(action: float, visible: bool) -> list[np.ndarray]:
         env = CrowdNavEnv(replace(SMALL, robot_visible=visible))
         env.reset(seed=2)
+        out = []
         for _ in range(40):
-            env.step(np.array([action, 0.0], np.float32))
-        return env.pedestrians().pos
+            _, _, term, trunc, _ = env.step(np.array([action, 0.0], np.float32))
+            out.append(env.pedestrians().pos)
+            if term or trunc:
+                break
+        return out
 
-    np.testing.assert_array_equal(crowd_after(1.0, False), crowd_after(-1.0, False))
-    assert not np.array_equal(crowd_after(1.0, True), crowd_after(-1.0, True))
+    for visible in (False, True):
+        fast, still = crowd_after(1.0, visible), crowd_after(-1.0, visible)
+        n = min(len(fast), len(still))
+        assert n >= 10
+        same = all(np.array_equal(a, b) for a, b in zip(fast[:n], still[:n], strict=True))
+        assert same is (not visible)
 
 
 def test_history_is_sampled_every_0_4_s():
