@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test test-fast lint bench clean
+.PHONY: setup demo demo-crowd test test-fast lint bench synthetic-predictor clean
 
 setup: $(STAMP)
 
@@ -15,9 +15,14 @@ $(STAMP): pyproject.toml Makefile
 	$(PY) -m pip install --quiet -e ".[dev,bench,viz,rl]"
 	touch $(STAMP)
 
-# Main job on built-in defaults: simulate a grouped crowd, export the dataset and a rerun recording.
+# Main job on built-in defaults: a grouped crowd, GP-Graph prediction and the MPC robot end to end; writes the
+# metrics (demo.json/.md), demo.png and a rerun recording demo.rrd to out/demo.
 demo: setup
-	$(VENV)/bin/crowdsim demo --out out/demo
+	$(VENV)/bin/crowdnav demo --out out/demo
+
+# The crowd simulator alone: simulate a grouped crowd, export the dataset and a rerun recording.
+demo-crowd: setup
+	$(VENV)/bin/crowdsim demo --out out/demo-crowd
 
 # The whole suite, slow tests included (CI runs exactly this).
 test: setup
@@ -33,6 +38,12 @@ lint: setup
 bench: setup
 	$(PY) bench/bench_crowdsim.py
 	$(PY) bench/bench_planner.py --quick
+	$(PY) bench/bench_env.py --quick
+
+# Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
+# (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~30 min on one CPU core. Not run in CI. See RESULTS.md.
+synthetic-predictor: setup
+	bash scripts/synthetic_predictor.sh all
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .ruff_cache
