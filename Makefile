@@ -41,7 +41,7 @@ bench: setup
 	$(PY) bench/bench_env.py --quick
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
-# (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~30 min on one CPU core. Not run in CI. See RESULTS.md.
+# (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~40 min on one CPU core. Not run in CI. See RESULTS.md.
 synthetic-predictor: setup
 	bash scripts/synthetic_predictor.sh all
 

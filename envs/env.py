@@ -174,10 +174,20 @@ class CrowdNavEnv(gym.Env):
         return Pedestrians(s.pos[act], s.vel[act], s.radius[act], s.group_id[act], s.ped_id[act])
 
     def history_window(self) -> np.ndarray:
-        """(8, N, 2) m positions at 0.4 s steps of `pedestrians()`, last row = now; only on a tick."""
-        if not self.is_planning_tick:
-            raise RuntimeError("history_window() is defined on 0.4 s ticks only (see is_planning_tick)")
-        return self.history.window(self.pedestrians().ped_id)
+        """(8, N, 2) m positions of `pedestrians()` 0.4 s apart, the last row being now. On a 0.4 s tick the
+        rows are the recorded snapshots; between ticks each row is interpolated linearly between the two
+        snapshots around its time (the newest interval ends at the current positions). A pedestrian seen for
+        less than 2.8 s is padded backwards with its earliest position."""
+        p = self.pedestrians()
+        if self.is_planning_tick:
+            return self.history.window(p.ped_id)
+        tick = self.config.ticks_per_prediction_step
+        w = (self._sim_steps % tick) / tick  # fraction of a 0.4 s step since the last snapshot
+        snaps = self.history.window(p.ped_id, current=p.pos)
+        out = np.empty_like(snaps)
+        out[:-1] = (1.0 - w) * snaps[:-1] + w * snaps[1:]
+        out[-1] = p.pos
+        return out
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped

@@ -27,10 +27,11 @@ class PedHistory:
         order = np.argsort(ped_id, kind="stable")
         self._snaps.append((np.asarray(ped_id)[order].copy(), np.asarray(pos, float)[order].copy()))
 
-    def window(self, ped_id: np.ndarray) -> np.ndarray:
+    def window(self, ped_id: np.ndarray, current: np.ndarray | None = None) -> np.ndarray:
         """(length, n, 2) m history of pedestrians ped_id (n,), oldest first; the last row is the newest
-        snapshot, which must contain every requested id. A pedestrian seen for fewer ticks is padded
-        backwards with its earliest known position (standing still), so the array is always finite."""
+        snapshot, which must contain every requested id unless `current` (n, 2) m is given to stand in for
+        those missing from it. A pedestrian seen for fewer ticks is padded backwards with its earliest known
+        position (standing still), so the array is always finite."""
         if not self._snaps:
             raise RuntimeError("no snapshot recorded yet")
         ped_id = np.asarray(ped_id)
@@ -41,9 +42,12 @@ class PedHistory:
             loc = np.clip(np.searchsorted(ids, ped_id), 0, max(len(ids) - 1, 0))
             found = (ids[loc] == ped_id) if len(ids) else np.zeros(len(ped_id), bool)
             if row == self.length - 1:
-                if not found.all():
+                if current is not None:
+                    out[row] = np.where(found[:, None], pos[loc] if len(ids) else 0.0, current)
+                elif not found.all():
                     raise KeyError(f"pedestrians {ped_id[~found].tolist()} are not in the newest snapshot")
-                out[row] = pos[loc]
+                else:
+                    out[row] = pos[loc]
             else:  # not seen at this tick: keep the next newer position
                 out[row] = np.where(found[:, None], pos[loc] if len(ids) else 0.0, out[row + 1])
             row -= 1

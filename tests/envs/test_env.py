@@ -239,9 +239,6 @@ def test_history_is_sampled_every_0_4_s():
     old = {pid: k for k, pid in enumerate(p.ped_id)}
     rows = [old[pid] for pid in env.pedestrians().ped_id[common]]
     np.testing.assert_array_equal(hist2[-2, common], p.pos[rows])  # shifted by one 0.4 s step
-    env.step(np.zeros(2, np.float32))
-    with pytest.raises(RuntimeError, match="tick"):
-        env.history_window()
 
 
 def test_predicted_groups_and_predictions_in_the_observation():
@@ -262,3 +259,19 @@ def test_flatten_observation_is_float32():
     obs, _ = env.reset(seed=0)
     assert obs.dtype == np.float32 and env.observation_space.dtype == np.float32
     assert env.observation_space.contains(obs)
+
+
+def test_history_between_ticks_is_interpolated_to_end_now():
+    env = CrowdNavEnv(SMALL)
+    env.reset(seed=0)
+    at_tick = env.history_window()
+    ids = env.pedestrians().ped_id
+    env.step(np.zeros(2, np.float32))  # 0.1 s later: a quarter of the way to the next snapshot
+    p = env.pedestrians()
+    keep = np.isin(p.ped_id, ids)
+    old = {pid: k for k, pid in enumerate(ids)}
+    rows = [old[pid] for pid in p.ped_id[keep]]
+    hist = env.history_window()
+    np.testing.assert_array_equal(hist[-1], p.pos)
+    expect = 0.75 * at_tick[:-1, rows] + 0.25 * at_tick[1:, rows]
+    np.testing.assert_allclose(hist[:-1, keep], expect)

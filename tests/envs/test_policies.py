@@ -29,12 +29,14 @@ def test_policy_reaches_the_goal_without_collision(name, crowd):
         assert np.linalg.norm(res.robot_xy[-1] - res.goal) < CFG.goal_tolerance_m
 
 
-def test_mpc_replans_every_0_4_s_and_holds_the_control_in_between():
+@pytest.mark.parametrize("every", [1, 4])
+def test_mpc_replans_at_its_interval_and_holds_the_control_in_between(every):
     env = CrowdNavEnv(replace(CFG, time_limit_s=4.0))
     policy = make_policy("mpc-cv", env)
+    policy.replan_every_steps = every
     res = run_episode(env.config, "mpc-cv", 3, env=env, policy=policy)
     steps = res.metrics["steps"]
-    assert res.metrics["plans"] == -(-steps // env.config.ticks_per_prediction_step)
+    assert res.metrics["plans"] == -(-steps // every)
     assert len(res.solve_times_ms) == res.metrics["plans"] - res.metrics["fallbacks"]
 
 

@@ -1,0 +1,111 @@
+"""Score the baselines on a test split with the metrics ``gpgraph evaluate`` uses.
+
+    python scripts/eval_baselines.py --data out/synthetic_predictor/data --seed 0 --trials 10 \
+        --json out/synthetic_predictor/eval/constant-velocity.json
+
+``gpgraph evaluate`` only takes GP-Graph checkpoints, so this runs ``load_predictor("constant-velocity")``
+(last-step velocity, per-pedestrian velocity noise of 0.05 m per step held over the horizon: its own
+sampling, neither ``iid`` nor ``paper``) on the same windows (DATA/test) with the same metric functions:
+best-of-K ADE/FDE, COL, TCC averaged over pedestrians and trials, and, since every pedestrian is its own
+group, the all-singletons PW/G-MITRE baseline. Also reports the deterministic extrapolation (K = 1, no
+noise) as ``ade_k1``/``fde_k1``, and under ``proximity`` distance-threshold grouping baselines: connected
+components of the pedestrians closer than R m at the last observed step (``last``) or at every one of the 8
+observed steps (``all``), R = 1.0 and 1.5 m (crowdsim spawns group members 0.75 m apart).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+
+from predictor import metrics
+from predictor.api import ConstantVelocityConfig, ConstantVelocityPredictor
+from predictor.cli import split_folder
+from predictor.windows import has_labels, load_windows
+
+PROXIMITY_RADII_M = (1.0, 1.5)
+
+
+def proximity_groups(obs: np.ndarray, radius_m: float, steps: str = "last") -> np.ndarray:
+    """Group ids (N,): connected components of pedestrians closer than ``radius_m`` at the last observed step
+    (``steps='last'``) or at every observed step (``steps='all'``) of obs (T, N, 2)."""
+    pts = obs[-1:] if steps == "last" else obs
+    d = np.linalg.norm(pts[:, :, None] - pts[:, None], axis=-1).max(axis=0)
+    return connected_components(d < radius_m, directed=False)[1]
+
+
+def proximity_scores(windows: list) -> dict[str, dict[str, float]]:
+    """PW and G-MITRE of the proximity groupings, keyed e.g. 'last-1.5m', for each radius and step rule."""
+    out = {}
+    for steps in ("last", "all"):
+        for r in PROXIMITY_RADII_M:
+            scores = metrics.GroupScores()
+            for w in windows:
+                scores.add(w.group_id, proximity_groups(w.obs, r, steps))
+            out[f"{steps}-{r:.1f}m"] = scores.result()
+    return out
+
+
+def evaluate_cv(windows: list, seed: int, trials: int, n_samples: int) -> dict:
+    """Metrics dict shaped like ``predictor.evaluate.evaluate``'s, for the constant-velocity predictor."""
+    rng = np.random.default_rng(seed)
+    cv = ConstantVelocityPredictor()
+    exact = ConstantVelocityPredictor(ConstantVelocityConfig(step_noise_m=0.0))
+    totals, k1, n_peds = np.zeros(4), np.zeros(2), 0
+    groups = metrics.GroupScores() if has_labels(windows) else None
+    for w in windows:
+        for _ in range(trials):
+            samples = cv.predict(w.obs, n_samples=n_samples, rng=rng).samples
+            ade, fde = metrics.ade_fde(samples, w.pred)
+            totals += [ade.sum(), fde.sum(), metrics.col(samples).sum(), metrics.tcc(samples, w.pred).sum()]
+        ade1, fde1 = metrics.ade_fde(exact.predict(w.obs, n_samples=1).samples, w.pred)
+        k1 += [ade1.sum(), fde1.sum()]
+        n_peds += w.n_peds
+        if groups is not None:
+            groups.add(w.group_id, np.arange(w.n_peds))
+    ade, fde, col, tcc = (totals / (n_peds * trials)).tolist()
+    result = {"ade": ade, "fde": fde, "col": col, "tcc": tcc}
+    if groups is not None:
+        result.update(groups.result())
+    result.update(ade_k1=k1[0] / n_peds, fde_k1=k1[1] / n_peds, protocol="constant-velocity", seed=seed,
+                  n_samples=n_samples, trials=trials, windows=len(windows), pedestrians=n_peds)
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--data", type=Path, required=True, help="dataset folder (DATA/test is scored)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--trials", type=int, default=10)
+    p.add_argument("--samples", type=int, default=20)
+    p.add_argument("--json", type=Path, default=None)
+    args = p.parse_args(argv)
+    windows = load_windows(split_folder(args.data, "test"))
+    if not windows:
+        p.error(f"no windows in {split_folder(args.data, 'test')}")
+    result = evaluate_cv(windows, args.seed, args.trials, args.samples)
+    print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in result.items()))
+    if has_labels(windows):
+        result["proximity"] = proximity_scores(windows)
+        for r, scores in result["proximity"].items():
+            print(f"proximity {r}: " + " ".join(f"{k}={v:.4f}" for k, v in scores.items()))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+
+        def nan_to_none(v):
+            if isinstance(v, dict):
+                return {k: nan_to_none(x) for k, x in v.items()}
+            return None if isinstance(v, float) and v != v else v
+
+        clean = nan_to_none(result)
+        args.json.write_text(json.dumps(clean, indent=2, allow_nan=False) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

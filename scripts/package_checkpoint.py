@@ -1,0 +1,49 @@
+"""Copy a training run's ``best.pt`` into a packaged ``.safetensors`` checkpoint (config and meta inside).
+
+    python scripts/package_checkpoint.py out/run/best.pt predictor/checkpoints/NAME.safetensors \
+        --scene synthetic --data out/synthetic_predictor/data
+
+The meta keeps what ``best.pt`` recorded (epoch, validation loss, training recipe) plus ``scene`` and, with
+``--data``, the names of the recordings in each split, so a shipped file says what it was trained on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from predictor.checkpoint import export_packaged, load_model
+
+
+def split_files(data: Path) -> dict[str, list[str]]:
+    """Trajectory file names per split folder of a crowdsim dataset."""
+    out = {}
+    for split in ("train", "val", "test"):
+        folder = data / split
+        if folder.is_dir():
+            out[split] = sorted(p.name for p in folder.glob("*.txt") if not p.name.endswith(".groups.txt"))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("checkpoint", type=Path, help="a training run's best.pt")
+    p.add_argument("out", type=Path, help="destination .safetensors")
+    p.add_argument("--scene", required=True, help="recorded in the meta as 'scene'")
+    p.add_argument("--data", type=Path, default=None, help="dataset folder; its file names go into the meta")
+    args = p.parse_args(argv)
+    if args.out.suffix != ".safetensors":
+        p.error("out must end in .safetensors")
+    model, meta = load_model(args.checkpoint)
+    meta = {**meta, "scene": args.scene}
+    if args.data is not None:
+        meta["data"] = split_files(args.data)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    export_packaged(model, args.out, meta=meta)
+    print(f"wrote {args.out} (epoch {meta.get('epoch')}, val loss {meta.get('val_loss')})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
