@@ -239,13 +239,9 @@ class CrowdNavEnv(gym.Env):
         )
 
     # ---------------------------------------------------------------------------------- internals
-    def _active(self) -> tuple[np.ndarray, np.ndarray]:
-        s = self._state
-        return s.ped_id[s.active], s.pos[s.active]
-
     def _record_tick(self) -> None:
-        ids, pos = self._active()
-        self.history.record(ids, pos)
+        p = self.pedestrians()
+        self.history.record(p.ped_id, p.pos)
 
     def _goal_distance(self) -> float:
         return float(np.linalg.norm(self.goal - self.robot_state[:2]))
@@ -300,19 +296,18 @@ class CrowdNavEnv(gym.Env):
             swept = swept_distances(before_pos, here, before.pos[rows], s.pos[rows]) - s.radius[rows] - r
             surface[both] = np.minimum(surface[both], swept)
         min_surface = float(surface.min()) if len(surface) else float("inf")
-        wall_hit = bool(len(self.crowd.walls)) and float(point_segment_distances(here, self.crowd.walls).min()) < r
+        hit_wall = bool(len(self.crowd.walls)) and float(point_segment_distances(here, self.crowd.walls).min()) < r
         intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
                                          cfg.group_span_m, centre))
         dist_after = self._goal_distance()
-        self._wall_hit = wall_hit
-        return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m,
-                         min_surface < 0.0 or wall_hit, min_surface, intruding)
+        return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m, hit_wall, min_surface,
+                         intruding)
 
     def _finish(self, facts: StepFacts, truncated: bool) -> None:
         m = self.metrics
         if facts.collided:
             m.collision = True
-            m.collision_with = "wall" if self._wall_hit and facts.min_surface_distance_m >= 0 else "pedestrian"
+            m.collision_with = "wall" if facts.hit_wall and facts.min_surface_distance_m >= 0 else "pedestrian"
         elif facts.reached_goal:
             m.success, m.time_to_goal_s = True, m.time_s
         elif truncated:

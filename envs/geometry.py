@@ -67,29 +67,14 @@ def distance_to_hull(p: np.ndarray, hull: np.ndarray) -> float:
     return float(point_segment_distances(p, edges).min())
 
 
-def group_regions(pos: np.ndarray, group_id: np.ndarray, max_span_m: float) -> list[tuple[int, np.ndarray]]:
-    """The regions of groups with >= 2 members: [(group id, hull (H, 2))], the convex hull of the members'
-    centres. Groups wider than max_span_m (max pairwise distance, m) are left out: they are not walking
-    together at that moment."""
-    out = []
-    for g in np.unique(group_id):
-        members = pos[group_id == g]
-        if len(members) < 2:
-            continue
-        diff = members[:, None] - members[None]
-        if np.sqrt(np.max(np.einsum("ijk,ijk->ij", diff, diff))) > max_span_m:
-            continue
-        out.append((int(g), convex_hull(members)))
-    return out
-
-
 def intruded_groups(robot: np.ndarray, reach_m: float, pos: np.ndarray, radius: np.ndarray, group_id: np.ndarray,
                     max_span_m: float, dist: np.ndarray | None = None) -> list[int]:
     """Ground-truth groups whose region the robot enters. A group's region is the convex hull of its
     members' discs (pos (N, 2) m, radius (N,) m) grown by a personal-space margin; the robot enters it when
     its centre (2,) is closer than reach_m (robot radius + margin) + the largest member radius to the hull
-    of the members' centres. Groups wider than max_span_m are skipped (see `group_regions`); only groups
-    with a member within max_span_m + reach_m + 0.5 m can qualify. dist (N,): robot-pedestrian centre
+    of the members' centres. Groups wider than max_span_m (largest pairwise centre distance, m) are skipped:
+    they are not walking together at that moment. Only groups with a member within max_span_m + reach_m +
+    0.5 m can qualify. dist (N,): robot-pedestrian centre
     distances, if already known."""
     if len(pos) == 0:
         return []

@@ -25,9 +25,14 @@ class StepFacts:
     goal_distance_before_m: float
     goal_distance_after_m: float
     reached_goal: bool
-    collided: bool
+    hit_wall: bool
     min_surface_distance_m: float  # to the nearest pedestrian (inf with nobody around)
     intruding: bool
+
+    @property
+    def collided(self) -> bool:
+        """Contact with a pedestrian (negative surface distance) or a wall."""
+        return self.min_surface_distance_m < 0.0 or self.hit_wall
 
 
 def reward_terms(facts: StepFacts, cfg: CrowdNavConfig) -> dict[str, float]:
