@@ -9,13 +9,14 @@ future step.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
+from functools import partial
 from typing import NamedTuple
 
 import torch
 from torch import Tensor, nn
 
 from predictor import grouping
-from predictor.backbones import check_backbone, make_backbone
+from predictor.backbones import Backbone, check_backbone, make_backbone
 
 INTEGRATIONS = ("mlp", "mean")
 Tuple3 = tuple[Tensor, Tensor, "Tensor | None"]
@@ -175,17 +176,31 @@ class GPGraph(nn.Module):
         return items
 
     def _run_stacked(self, items: list[Tuple3]) -> list[Tensor]:
-        """One backbone call over all branches stacked along the batch (exact: padding is masked)."""
+        """One backbone call over all branches stacked along the batch (exact: padding is masked).
+
+        Without gradients the intra-group branch's features equal the pedestrian branch's (the
+        straight-through estimator only changes gradients), so the two share one batch slice and the
+        backbone's edge-independent work (``Backbone.forward_variants``).
+        """
         n = max(f.shape[2] for f, _, _ in items)
-        feats, masks, edges = [], [], []
-        for f, m, e in items:
+        share = not torch.is_grad_enabled() and self.config.pedestrian_branch and self.config.intra_branch
+        feats: list[Tensor] = []
+        masks: list[Tensor] = []
+        variants = []
+        for k, (f, m, e) in enumerate(items):
+            if share and k == len(items) - 1:  # intra: reuse the pedestrian slice (items[0])
+                variants.append((variants[0][0], e))
+                continue
             pad = n - f.shape[2]
+            b0 = sum(x.shape[0] for x in feats)
             feats.append(nn.functional.pad(f, (0, 0, 0, pad)))
             masks.append(nn.functional.pad(m, (0, pad)))
-            full = grouping.pair_mask(masks[-1]) if e is None else nn.functional.pad(e, (0, pad, 0, pad))
-            edges.append(full)
-        out = self.backbones[0](torch.cat(feats), torch.cat(masks), torch.cat(edges))
-        return [o[:, :, : f.shape[2]] for o, (f, _, _) in zip(out.chunk(len(items)), items, strict=True)]
+            edge = None if e is None else nn.functional.pad(e, (0, pad, 0, pad))
+            variants.append((slice(b0, b0 + f.shape[0]), edge))
+        backbone = self.backbones[0]
+        run = backbone.forward_variants if share else partial(Backbone.forward_variants, backbone)
+        outs = run(torch.cat(feats), torch.cat(masks), variants)
+        return [o[:, :, : f.shape[2]] for o, (f, _, _) in zip(outs, items, strict=True)]
 
     def forward(self, obs_abs: Tensor, obs_rel: Tensor, node_mask: Tensor) -> Output:
         """obs_abs, obs_rel: (B, 8, N, 2) positions (m) and displacements (m/step); node_mask (B, N)."""

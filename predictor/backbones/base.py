@@ -10,6 +10,10 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
+from predictor.grouping import pair_mask
+
+Variant = tuple[slice, "Tensor | None"]
+
 
 def displacement_features(rel: Tensor, with_time: bool) -> Tensor:
     """Node features from displacements ``rel`` (B, T, N, 2), m/step; optionally prepend t = 1..T."""
@@ -33,6 +37,19 @@ class Backbone(nn.Module):
     def forward(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None = None) -> Tensor:
         """x (B, T, N, C), node_mask (B, N) bool, edge_mask (B, N, N) bool or None -> (B, 12, N, 5)."""
         raise NotImplementedError
+
+    def forward_variants(self, x: Tensor, node_mask: Tensor, variants: list[Variant]) -> list[Tensor]:
+        """Outputs for several views of one batch: each variant is (batch slice, edge mask or None).
+
+        x (B, T, N, C), node_mask (B, N); an edge mask is (b, N, N) for the b windows of its slice. Returns
+        one (b, 12, N, 5) output per variant. This default stacks the views and runs ``forward`` once; a
+        backbone whose edge-independent work is costly overrides it to do that work once per window.
+        """
+        feats = torch.cat([x[sl] for sl, _ in variants])
+        masks = torch.cat([node_mask[sl] for sl, _ in variants])
+        edges = torch.cat([pair_mask(node_mask[sl]) if e is None else e for sl, e in variants])
+        out = self(feats, masks, edges)
+        return list(out.split([f.shape[0] for f in (x[sl] for sl, _ in variants)]))
 
     @staticmethod
     def reference_renames() -> list[tuple[str, str]]:

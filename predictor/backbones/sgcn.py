@@ -17,7 +17,7 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from predictor.backbones.base import Backbone, displacement_features
+from predictor.backbones.base import Backbone, Variant, displacement_features
 from predictor.grouping import pair_mask
 
 
@@ -32,9 +32,11 @@ class AsymmetricConv(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         """Training: both convolutions as one 5-tap contraction (its backward is several times faster than
-        that of two tiny CPU convolutions). Inference: the plain convolutions (faster forward)."""
+        that of two tiny CPU convolutions). Inference: one 3x3 convolution with the cross-shaped sum of the
+        two kernels (1.5x faster than the two convolutions; equal up to float rounding)."""
         if not torch.is_grad_enabled():
-            return self.act(self.conv_w(x) + self.conv_h(x)) + x
+            cross = F.pad(self.conv_h.weight, (1, 1)) + F.pad(self.conv_w.weight, (0, 0, 1, 1))
+            return self.act(F.conv2d(x, cross, self.conv_w.bias, padding=1)) + x
         h, w = x.shape[-2:]
         wh, ww = self.conv_h.weight[..., 0], self.conv_w.weight[:, :, 0]  # (out, in, 3)
         taps = torch.stack([wh[..., 0], wh[..., 2], ww[..., 0], ww[..., 2], wh[..., 1] + ww[..., 1]], -1)
@@ -140,8 +142,9 @@ class SGCN(Backbone):
         y = torch.where(y > self.mask_threshold, y, torch.zeros_like(y)).reshape(t.shape)
         return x, y
 
-    def adjacency(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None) -> tuple[Tensor, Tensor]:
-        """Normalised sparse spatial (B, T, H, N, N) and temporal (B, N, H, T, T) adjacencies."""
+    def _edge_free(self, x: Tensor, node_mask: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """The work that no edge mask changes: masked spatial scores (B, T, H, N, N), the valid-pair mask
+        (B, N, N) and the normalised temporal adjacency (B, N, H, T, T)."""
         b, t, n, _ = x.shape
         valid = pair_mask(node_mask)
         att_s = self.spatial_att(x[..., 1:], node_mask[:, None, :].expand(b, t, n))
@@ -152,13 +155,22 @@ class SGCN(Backbone):
         mask_s, mask_t = self._masks(fused, att_t, valid)
         mask_s = mask_s + torch.eye(n, dtype=x.dtype, device=x.device)
         mask_t = mask_t + torch.eye(t, dtype=x.dtype, device=x.device)
-        keep = valid if edge_mask is None else valid & edge_mask
-        mask_s = mask_s * keep[:, None, None].to(x.dtype)
-        return zero_softmax(att_s * mask_s), zero_softmax(att_t * mask_t)
+        return att_s * mask_s, valid, zero_softmax(att_t * mask_t)
 
-    def forward(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None = None) -> Tensor:
+    @staticmethod
+    def _spatial(scores: Tensor, valid: Tensor, edge_mask: Tensor | None) -> Tensor:
+        """Normalised sparse spatial adjacency (B, T, H, N, N) keeping the valid pairs of ``edge_mask``."""
+        keep = valid if edge_mask is None else valid & edge_mask
+        return zero_softmax(scores * keep[:, None, None].to(scores.dtype))
+
+    def adjacency(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None) -> tuple[Tensor, Tensor]:
+        """Normalised sparse spatial (B, T, H, N, N) and temporal (B, N, H, T, T) adjacencies."""
+        scores, valid, adj_t = self._edge_free(x, node_mask)
+        return self._spatial(scores, valid, edge_mask), adj_t
+
+    def _decode(self, x: Tensor, adj_s: Tensor, adj_t: Tensor) -> Tensor:
+        """Sparse GCNs, head fusion and the TCN: (B, T, N, 3) features -> (B, 12, N, 5)."""
         b, t, n, _ = x.shape
-        adj_s, adj_t = self.adjacency(x, node_mask, edge_mask)
         pos = x[..., 1:]  # (B, T, N, 2)
         st = self.gcn_st[0](pos[:, :, None], adj_s).permute(0, 3, 2, 1, 4)  # (B, N, H, T, d)
         st = self.gcn_st[1](st, adj_t)
@@ -172,6 +184,19 @@ class SGCN(Backbone):
             feat = act(conv(feat)) + feat
         out = self.output(feat).mean(dim=-2)  # (B*N, 12, 5)
         return out.reshape(b, n, -1, 5).transpose(1, 2)
+
+    def forward(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None = None) -> Tensor:
+        return self._decode(x, *self.adjacency(x, node_mask, edge_mask))
+
+    def forward_variants(self, x: Tensor, node_mask: Tensor, variants: list[Variant]) -> list[Tensor]:
+        """The attention, interaction masks and temporal adjacency once per window; then the variants'
+        spatial adjacencies and one stacked decoder pass (see ``Backbone.forward_variants``)."""
+        scores, valid, adj_t = self._edge_free(x, node_mask)
+        keep = torch.cat([valid[sl] if e is None else valid[sl] & e for sl, e in variants])
+        adj_s = self._spatial(torch.cat([scores[sl] for sl, _ in variants]), keep, None)
+        cat = [torch.cat([a[sl] for sl, _ in variants]) for a in (x, adj_t)]
+        out = self._decode(cat[0], adj_s, cat[1])
+        return list(out.split([x[sl].shape[0] for sl, _ in variants]))
 
     @staticmethod
     def reference_renames() -> list[tuple[str, str]]:

@@ -125,3 +125,19 @@ def test_sgcn_training_and_inference_paths_agree() -> None:
     with torch.no_grad():
         conv = layer(x)
     torch.testing.assert_close(layer(x), conv, atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("backbone", sorted(BACKBONES))
+def test_inference_sharing_matches_training_forward(backbone: str) -> None:
+    """Without gradients the pedestrian and intra-group branches share the backbone's edge-independent
+    work; the outputs must equal the stacked forward that training runs."""
+    torch.manual_seed(1)
+    model = GPGraph(GPGraphConfig(backbone=backbone)).eval()
+    b = collate(_windows([5, 9, 2, 7], seed=3))
+    with torch.no_grad():
+        shared = model(b.obs_abs, b.obs_rel, b.node_mask)
+    stacked = model(b.obs_abs, b.obs_rel, b.node_mask)
+    assert stacked.raw.requires_grad and not shared.raw.requires_grad
+    assert torch.equal(shared.groups, stacked.groups)
+    real = b.node_mask[:, None, :, None].expand_as(shared.raw)
+    torch.testing.assert_close(shared.raw[real], stacked.raw.detach()[real], atol=1e-5, rtol=1e-4)
