@@ -134,6 +134,13 @@ def batch_loss(model: GPGraph, batch: Batch) -> Tensor:
     return loss
 
 
+def eval_batches(windows: list[Window], batch_size: int, max_pairs: int) -> list[Batch]:
+    """Size-sorted batches of at most ``batch_size`` windows and ``max_pairs`` padded pair slots (0: no
+    pair limit), for passes without gradients: the window-weighted loss does not depend on the grouping."""
+    parts = split_by_size(windows, max_pairs) if max_pairs > 0 else [sorted(windows, key=lambda w: w.n_peds)]
+    return [collate(p[i : i + batch_size]) for p in parts for i in range(0, len(p), batch_size)]
+
+
 @torch.no_grad()
 def validation_loss(model: GPGraph, batches: list[Batch]) -> float:
     """Window-weighted mean loss over ``batches``."""
@@ -195,7 +202,7 @@ def train(
     start, best = (0, float("inf"))
     if resume and (out / "last.pt").is_file():
         start, best = _resume(out, model, opt, sched, rng)
-    val_batches = [collate(val_windows[i : i + cfg.batch_size]) for i in range(0, len(val_windows), cfg.batch_size)]
+    val_batches = eval_batches(val_windows, cfg.batch_size, cfg.pair_budget)
     log_path = out / "log.csv"
     if start == 0 or not log_path.is_file():
         log_path.write_text(",".join(LOG_FIELDS) + "\n")

@@ -8,7 +8,7 @@ import torch
 
 from predictor.batch import collate
 from predictor.model import GPGraph, GPGraphConfig
-from predictor.train import TrainConfig, batch_loss, make_batches, split_by_size
+from predictor.train import TrainConfig, batch_loss, eval_batches, make_batches, split_by_size, validation_loss
 from predictor.windows import Window
 
 
@@ -68,3 +68,15 @@ def test_train_config_validation() -> None:
         TrainConfig(lr=0.0)
     with pytest.raises(ValueError):
         TrainConfig(max_pairs=-1)
+
+
+def test_validation_loss_does_not_depend_on_batching() -> None:
+    torch.manual_seed(0)
+    model = GPGraph(GPGraphConfig(backbone="sgcn"))
+    windows = _windows([2, 9, 3, 2, 8, 5, 4], seed=2)
+    sized = eval_batches(windows, batch_size=3, max_pairs=40)
+    assert sum(b.node_mask.shape[0] for b in sized) == len(windows)
+    assert all(b.node_mask.shape[0] <= 3 and b.node_mask.shape[0] * b.node_mask.shape[1] ** 2 <= 81 for b in sized)
+    one = validation_loss(model, [collate(windows)])
+    assert validation_loss(model, sized) == pytest.approx(one, rel=1e-5)
+    assert validation_loss(model, eval_batches(windows, batch_size=2, max_pairs=0)) == pytest.approx(one, rel=1e-5)
