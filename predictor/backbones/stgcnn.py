@@ -8,6 +8,9 @@ convolution (graph conv + temporal conv, residual) is followed by a time-extrapo
 pedestrian indices (padded nodes are zeroed after every layer so padding stays exact).
 Output (B, 12, N, 5) raw bivariate Gaussian parameters.
 
+The adjacency carries no gradient (Social-STGCNN precomputes it; the GP-Graph authors' STGCNN wrapper
+detaches it), so the group assignment learns through the branch features only.
+
 Deviations from the original: batch normalisation is left out (padded nodes would bias its statistics)
 and the features are permuted, not reshaped, between the two stages.
 """
@@ -56,7 +59,8 @@ class STGCNN(Backbone):
         return rel
 
     def forward(self, x: Tensor, node_mask: Tensor, edge_mask: Tensor | None = None) -> Tensor:
-        adj = laplacian_adjacency(x, node_mask, edge_mask)  # (B, T, N, N)
+        with torch.no_grad():  # a fixed function of the input, as in the authors' GP-Graph-STGCNN code
+            adj = laplacian_adjacency(x, node_mask, edge_mask)  # (B, T, N, N)
         v = x.permute(0, 3, 1, 2)  # (B, 2, T, N)
         g = torch.einsum("bctv,btvw->bctw", self.gcn_conv(v), adj)
         keep = node_mask[:, None, None, :].to(x.dtype)  # zero padded nodes after every layer: the
