@@ -159,16 +159,35 @@ def test_reference_checkpoint_with_wrong_backbone(reference: Path) -> None:
         load_predictor(reference / "hotel" / "val_best.pth", backbone="transformer")
 
 
-@pytest.mark.parametrize("name", ["gpgraph-stgcnn-hotel", "stgcnn-zara1"])
+@pytest.mark.parametrize("name", ["gpgraph-stgcnn-hotel", "stgcnn-zara1", "gpgraph-sgcn-univ", "sgcn-hotel"])
 def test_packaged_checkpoints_load_by_name(name: str) -> None:
     from predictor.checkpoint import PACKAGE_CHECKPOINTS
 
     if not (PACKAGE_CHECKPOINTS / f"{name}.safetensors").is_file():
         pytest.skip(f"packaged checkpoint {name} not present")
     pred = load_predictor(name)
-    assert pred.model.config.backbone == "stgcnn"
+    assert pred.model.config.backbone == ("sgcn" if "sgcn" in name else "stgcnn")
     assert pred.model.config.uses_groups == name.startswith("gpgraph")
     out = pred.predict(_history(6), n_samples=4, rng=np.random.default_rng(0))
     assert out.samples.shape == (4, 12, 6, 2) and np.isfinite(out.samples).all()
     # a trained model predicts continuing motion: the mean moves on from the last observed position
     assert np.linalg.norm(out.mean[-1] - _history(6)[-1], axis=-1).mean() > 0.5
+
+
+def test_packaged_eth_ucy_checkpoints_match_their_names() -> None:
+    """Every packaged `[gpgraph-]<backbone>-<scene>` file holds that backbone, grouping and scene."""
+    import re
+
+    from predictor.checkpoint import PACKAGE_CHECKPOINTS, load_model
+
+    pattern = re.compile(r"(gpgraph-)?(sgcn|stgcnn)-(eth|hotel|univ|zara1|zara2)")
+    names = [p.stem for p in sorted(PACKAGE_CHECKPOINTS.glob("*.safetensors")) if pattern.fullmatch(p.stem)]
+    if not names:
+        pytest.skip("no packaged ETH/UCY checkpoints")
+    for name in names:
+        grouped, backbone, scene = pattern.fullmatch(name).groups()
+        model, meta = load_model(name)
+        assert meta["scene"] == scene, name
+        assert model.config.backbone == backbone, name
+        assert model.config.uses_groups == bool(grouped), name
+        assert meta["train"]["seed"] == 0 and meta["epoch"] < meta["train"]["epochs"], name
