@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from scipy import sparse
-from scipy.sparse import csgraph
 from torch import Tensor
 
 GROUPING_MODES = ("exact", "official", "ratio")
@@ -30,17 +28,22 @@ def pairwise_distance(emb: Tensor) -> Tensor:
 def connected_components(adj: Tensor) -> Tensor:
     """Exact connected components of symmetric bool graphs ``adj`` (B, N, N); labels (B, N) by first member.
 
-    One scipy call on the block-diagonal graph of the whole batch.
+    Min-label propagation in numpy: every node repeatedly takes the smallest index among itself and its
+    neighbours until nothing changes (at most the graph diameter + 1 passes), so each component ends up
+    labelled by its first member; components are then numbered 0, 1, ... in order of first members.
     """
-    b, n, _ = adj.shape
-    w, i, j = np.nonzero(adj.detach().cpu().numpy())
-    graph = sparse.coo_matrix((np.ones(len(w), dtype=bool), (w * n + i, w * n + j)), shape=(b * n, b * n))
-    comp = csgraph.connected_components(graph, directed=False)[1]
-    first = np.full(comp.max() + 1, b * n, dtype=np.int64)
-    np.minimum.at(first, comp, np.arange(b * n))
-    is_root = (first[comp] == np.arange(b * n)).reshape(b, n)
+    a = adj.detach().cpu().numpy()
+    a = a | a.transpose(0, 2, 1)
+    b, n, _ = a.shape
+    lab = np.broadcast_to(np.arange(n), (b, n)).copy()
+    while True:
+        nxt = np.minimum(lab, np.where(a, lab[:, None, :], n).min(axis=2))
+        if np.array_equal(nxt, lab):
+            break
+        lab = nxt
+    is_root = lab == np.arange(n)
     rank = np.cumsum(is_root, axis=1) - 1
-    return torch.from_numpy(rank.reshape(-1)[first[comp]].reshape(b, n)).to(adj.device)
+    return torch.from_numpy(np.take_along_axis(rank, lab, axis=1)).to(adj.device)
 
 
 def official_relabel(adj: np.ndarray) -> np.ndarray:

@@ -121,5 +121,8 @@ def cholesky_2x2(cov: np.ndarray) -> np.ndarray:
 
 def sample_positions(mu: np.ndarray, chol: np.ndarray, z: np.ndarray, last: np.ndarray) -> np.ndarray:
     """Absolute samples (K, T, N, 2) from step means ``mu`` (T, N, 2), factors (T, N, 2, 2), latents, last (N, 2)."""
-    steps = mu[None] + np.einsum("tnij,ktnj->ktni", chol, z)
+    z0, z1 = z[..., 0], z[..., 1]
+    steps = np.empty(z.shape)
+    steps[..., 0] = mu[None, ..., 0] + chol[None, ..., 0, 0] * z0 + chol[None, ..., 0, 1] * z1
+    steps[..., 1] = mu[None, ..., 1] + chol[None, ..., 1, 0] * z0 + chol[None, ..., 1, 1] * z1
     return last[None, None] + np.cumsum(steps, axis=1)

@@ -29,6 +29,22 @@ def test_connected_components_numbers_by_first_member() -> None:
     np.testing.assert_array_equal(grouping.connected_components(adj)[0].numpy(), [0, 1, 2, 1, 2, 0])
 
 
+def test_connected_components_match_scipy_on_random_graphs() -> None:
+    from scipy.sparse import csgraph
+
+    rng = np.random.default_rng(0)
+    for n, density in [(1, 0.0), (7, 0.1), (20, 0.08), (40, 0.03), (57, 0.3)]:
+        upper = np.triu(rng.random((6, n, n)) < density, k=1)
+        adj = upper | upper.transpose(0, 2, 1)
+        ours = grouping.connected_components(torch.from_numpy(adj)).numpy()
+        for b in range(6):
+            ref = csgraph.connected_components(adj[b], directed=False)[1]
+            # same partition, numbered by first member
+            first = {c: i for i, c in reversed(list(enumerate(ref)))}
+            order = {c: r for r, c in enumerate(sorted(first, key=first.get))}
+            np.testing.assert_array_equal(ours[b], [order[c] for c in ref])
+
+
 def test_threshold_groups_ignore_padding_and_pad_with_own_groups() -> None:
     dist = torch.full((1, 4, 4), 5.0)
     dist[0, 0, 1] = dist[0, 1, 0] = 0.5
