@@ -49,7 +49,7 @@ class Backbone(nn.Module):
         masks = torch.cat([node_mask[sl] for sl, _ in variants])
         edges = torch.cat([pair_mask(node_mask[sl]) if e is None else e for sl, e in variants])
         out = self(feats, masks, edges)
-        return list(out.split([f.shape[0] for f in (x[sl] for sl, _ in variants)]))
+        return list(out.split([x[sl].shape[0] for sl, _ in variants]))
 
     @staticmethod
     def reference_renames() -> list[tuple[str, str]]:
