@@ -1,33 +1,35 @@
-"""`crowdnav` console script: evaluate navigation policies in the crowd env, and the end-to-end demo.
+"""`crowdnav` console script: evaluate policies, run a benchmark suite, and the end-to-end demo.
 
-    crowdnav evaluate --policy mpc-gpgraph mpc-cv --scenario plaza --episodes 50 --seed 0 --workers 2 \\
-        --json out/eval/results.json --out out/eval
+    crowdnav evaluate --policy mpc-gpgraph mpc-cv --scenario plaza --episodes 50 --seed 0 --out out/eval
+    crowdnav benchmark --suite crowdnav-v1 --policy mpc-gpgraph mpc-cv mpc-none social-force --out out/bench
     crowdnav demo [--out out/demo]
-    crowdnav policies | crowdnav scenarios
+    crowdnav policies | scenarios | suites
+
+Misuse (an unknown name, a bad value, an unwritable output path, a flag the chosen policy ignores) prints one
+line on stderr and exits 2 before any episode runs.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from envs.cli_options import add_backend_options, add_policy_options, check_backend, default_workers, policy_configs
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 
 DEMO_POLICY = "mpc-gpgraph"
 DEMO_SCENARIO = "plaza"
 DEMO_PEDESTRIANS = 24
 DEMO_EPISODES = 10
+FMT = argparse.ArgumentDefaultsHelpFormatter
 
 
-def policy_names() -> list[str]:
-    from envs.policies import POLICIES
-
-    return list(POLICIES)
+class UsageError(Exception):
+    """A misuse of the command line: reported as one line, exit 2."""
 
 
 def scenario_names() -> list[str]:
@@ -36,119 +38,120 @@ def scenario_names() -> list[str]:
     return [*sorted(SCENARIOS), REPLAY_SCENARIO]
 
 
-def _default_workers() -> int:
-    return max(1, min(2, os.cpu_count() or 1))
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="crowdnav", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
-    e = sub.add_parser("evaluate", help="run policies over fixed episode seeds and report the metrics")
-    e.add_argument("--policy", nargs="+", required=True, metavar="NAME", help="one or more of: "
-                   + ", ".join(policy_names()))
+    e = sub.add_parser("evaluate", help="run policies over fixed episode seeds and report the metrics",
+                       formatter_class=FMT)
+    add_policy_options(e)
     e.add_argument("--scenario", default="plaza", help="one of: " + ", ".join(scenario_names()))
     e.add_argument("--episodes", type=int, default=20, help="episodes (seeds seed .. seed + episodes - 1)")
     e.add_argument("--seed", type=int, default=0, help="first episode seed")
-    e.add_argument("--workers", type=int, default=_default_workers(), help="processes (1: in this process)")
     e.add_argument("--json", type=Path, default=None, metavar="OUT",
-                   help="JSON path of the results (several policies: one entry per policy)")
+                   help="also write the results JSON here (several policies: one entry per policy)")
     e.add_argument("--out", type=Path, default=Path("out/eval"), metavar="DIR",
-                   help="folder for <policy>.json/.md/.png, recordings and the comparison (default out/eval)")
-    e.add_argument("--pedestrians", type=int, default=None, help="crowd size (default 24)")
-    e.add_argument("--invisible", action="store_true", help="pedestrians do not see the robot")
+                   help="folder for <policy>.json/.md/.png, recordings and the comparison")
+    e.add_argument("--pedestrians", type=int, default=None, help="crowd size (simulated scenarios; default 24)")
+    e.add_argument("--invisible", action="store_true", help="pedestrians do not see the robot (simulated scenarios)")
     e.add_argument("--time-limit", type=float, default=None, metavar="S", help="episode time limit, s (default 40)")
     e.add_argument("--record", type=int, default=2, metavar="R", help="rerun recordings of the first R episodes")
-    e.add_argument("--predictor", default=None, metavar="NAME",
-                   help="mpc-gpgraph only: predictor name or checkpoint instead of the shipped default")
     e.add_argument("--replay-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: ETH/UCY-format trajectory file (frame ped x y)")
+    e.add_argument("--frame-step", type=float, default=None, metavar="S",
+                   help="scenario replay: seconds per annotation step (default 0.4; biwi_eth: 0.6667)")
     e.add_argument("--groups-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: group file (one group of ped ids per line)")
-    e.add_argument("--no-progress", action="store_true", help="no progress bar")
-    e.set_defaults(subparser=e)
+    add_backend_options(e)
 
-    d = sub.add_parser("demo", help="a grouped crowd, GP-Graph prediction and the MPC robot, end to end")
+    b = sub.add_parser("benchmark", help="run policies on every episode of a named suite; leaderboard and "
+                       "paired comparisons", formatter_class=FMT)
+    b.add_argument("--suite", required=True, help="suite name (crowdnav suites lists them)")
+    b.add_argument("--cells", default=None, metavar="A,B", help="comma-separated cells of the suite (default all)")
+    add_policy_options(b, required=False)
+    b.set_defaults(policy=None)
+    b.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="records.jsonl and leaderboard.json/.md/.png; rerun with the same DIR to resume")
+    b.add_argument("--data", type=Path, default=Path("../shared/datasets/eth_ucy"), metavar="DIR",
+                   help="ETH/UCY folder (eth/, hotel/, univ/, zara1/, zara2/) for the real cells")
+    b.add_argument("--merge", type=Path, nargs="+", action="extend", default=[], metavar="RECORDS",
+                   help="records.jsonl files from other runs or machines to merge into the leaderboard")
+    add_backend_options(b)
+
+    d = sub.add_parser("demo", help="a grouped crowd, GP-Graph prediction and the MPC robot, end to end",
+                       formatter_class=FMT)
     d.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR")
     d.add_argument("--episodes", type=int, default=DEMO_EPISODES)
-    d.add_argument("--workers", type=int, default=_default_workers())
+    d.add_argument("--workers", type=int, default=default_workers())
     d.add_argument("--predictor", default=None, metavar="NAME", help="instead of the shipped GP-Graph")
     d.add_argument("--no-progress", action="store_true", help="no progress bar")
-    d.set_defaults(subparser=d)
 
-    sub.add_parser("policies", help="list the policy names")
-    sub.add_parser("scenarios", help="list the scenario names")
+    for name, text in (("policies", "list the policy names"), ("scenarios", "list the scenario names"),
+                       ("suites", "list the benchmark suites and their cells")):
+        sub.add_parser(name, help=text)
     return parser
 
 
-def _config(args: argparse.Namespace, parser: argparse.ArgumentParser) -> CrowdNavConfig:
+def _config(args: argparse.Namespace) -> CrowdNavConfig:
     if args.scenario not in scenario_names():
-        parser.error(f"unknown scenario {args.scenario!r}; valid names: {', '.join(scenario_names())}")
-    kw: dict[str, Any] = {"scenario": args.scenario, "robot_visible": not args.invisible}
-    if args.pedestrians is not None:
-        kw["n_pedestrians"] = args.pedestrians
-        if args.pedestrians >= 1:  # a small crowd caps the group size (as `crowdsim generate` does)
-            from crowdsim import GroupConfig
-
-            kw["groups"] = replace(GroupConfig(), max_size=min(GroupConfig().max_size, args.pedestrians))
-    if args.time_limit is not None:
-        kw["time_limit_s"] = args.time_limit
-    if args.scenario == REPLAY_SCENARIO:
+        raise UsageError(f"unknown scenario {args.scenario!r}; valid names: {', '.join(scenario_names())}")
+    replay = args.scenario == REPLAY_SCENARIO
+    kw: dict[str, Any] = {"scenario": args.scenario}
+    if replay:
         if args.replay_file is None:
-            parser.error("--scenario replay needs --replay-file PATH")
+            raise UsageError("--scenario replay needs --replay-file PATH")
+        if args.pedestrians is not None or args.invisible:
+            raise UsageError("--pedestrians and --invisible do not apply to --scenario replay (recorded people)")
         from envs.replay import ReplayConfig
 
-        try:
-            kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file)
-        except ValueError as exc:
-            parser.error(str(exc))
-    elif args.replay_file is not None or args.groups_file is not None:
-        parser.error("--replay-file/--groups-file need --scenario replay")
-    try:
-        config = CrowdNavConfig(**kw)
-        if config.scenario != REPLAY_SCENARIO:
-            config.sim_config()  # validates the crowd settings before any worker starts
-        return config
-    except ValueError as exc:
-        parser.error(str(exc))
-        raise  # unreachable: parser.error exits
+        rkw = {"frame_step_s": args.frame_step} if args.frame_step is not None else {}
+        kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file, **rkw)
+    elif args.replay_file is not None or args.groups_file is not None or args.frame_step is not None:
+        raise UsageError("--replay-file/--groups-file/--frame-step need --scenario replay")
+    else:
+        kw["robot_visible"] = not args.invisible
+    if args.pedestrians is not None:
+        from crowdsim import GroupConfig
+
+        kw["n_pedestrians"] = args.pedestrians
+        kw["groups"] = replace(GroupConfig(), max_size=max(1, min(GroupConfig().max_size, args.pedestrians)))
+    if args.time_limit is not None:
+        kw["time_limit_s"] = args.time_limit
+    config = CrowdNavConfig(**kw)
+    if not replay:
+        config.sim_config()  # validates the crowd settings before any worker starts
+    else:
+        from envs.env import make_crowd
+
+        make_crowd(config)  # reads and checks the recording now
+    return config
 
 
-def _fail(exc: BaseException) -> int:
-    print(f"crowdnav: error: {exc}", file=sys.stderr)
-    return 1
+def _evaluate(args: argparse.Namespace) -> int:
+    from envs.atomic import check_writable_dir, check_writable_file, write_json_atomic, write_text_atomic
+    from envs.evaluate import check_setup, evaluate
+    from envs.report import compare, compare_json, compare_png, markdown_table
 
-
-def _evaluate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    from envs.evaluate import compare, compare_json, compare_png, evaluate, markdown_table, write_json_atomic
-
-    valid = policy_names()
-    unknown = [p for p in args.policy if p not in valid]
-    if unknown:
-        parser.error(f"unknown policy {', '.join(map(repr, unknown))}; valid names: {', '.join(valid)}")
-    if len(set(args.policy)) != len(args.policy):
-        parser.error("a policy is named twice")
-    for name in ("episodes", "workers"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name} must be >= 1")
-    if args.seed < 0 or args.record < 0:
-        parser.error("--seed and --record must be >= 0")
-    config = _config(args, parser)
+    if args.episodes < 1 or args.seed < 0 or args.record < 0:
+        raise UsageError("--episodes must be >= 1, --seed and --record >= 0")
+    check_backend(args)
+    configs = policy_configs(args)
+    config = _config(args)
+    check_writable_dir(args.out)
+    if args.json is not None:
+        check_writable_file(args.json)
+    for pcfg in configs:  # every policy and plug-in builds before any episode runs
+        check_setup(pcfg, config)
     results = []
-    try:
-        for name in args.policy:
-            result = evaluate(name, config, args.episodes, args.seed, args.workers, args.record, args.out,
-                              predictor=args.predictor, progress=not args.no_progress)
-            results.append(result)
-            print(markdown_table(result), end="\n\n", flush=True)
-    except (ValueError, OSError) as exc:
-        return _fail(exc)
+    for pcfg in configs:
+        result = evaluate(pcfg, config, args.episodes, args.seed, args.workers, args.record, args.out,
+                          progress=not args.no_progress, backend=args.backend, address=args.address)
+        results.append(result)
+        print(markdown_table(result), end="\n\n", flush=True)
     if len(results) > 1:
         table = compare(results)
         print(table)
-        from envs.evaluate import write_text_atomic
-
         write_text_atomic(args.out / "comparison.md", table + "\n")
         write_json_atomic(args.out / "comparison.json", compare_json(results))
         compare_png(results, args.out / "comparison.png")
@@ -157,21 +160,43 @@ def _evaluate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     return 0
 
 
-def _demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    from envs.evaluate import evaluate, markdown_table, write_json_atomic
+def _benchmark(args: argparse.Namespace) -> int:
+    from envs.benchmark import run_benchmark
+    from envs.leaderboard import leaderboard_markdown
+    from envs.suite import load_suite
+
+    check_backend(args)
+    suite = load_suite(args.suite)
+    cells = suite.select(args.cells.split(",") if args.cells else None)
+    args.policy = args.policy or ["mpc-gpgraph", "mpc-cv", "mpc-none", "social-force"]
+    configs = policy_configs(args)
+    board = run_benchmark(suite, cells, configs, args.out, data=args.data, workers=args.workers,
+                          backend=args.backend, address=args.address, merge=args.merge,
+                          progress=not args.no_progress)
+    print(leaderboard_markdown(board))
+    run = board["run"]
+    print(f"\n{run['episodes_run']} episodes run, {run['episodes_resumed']} already recorded, "
+          f"{run['wall_time_s']:.0f} s; wrote {args.out}/leaderboard.json, .md, .png and records.jsonl")
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    import os
+
+    from envs.atomic import check_writable_dir, write_json_atomic
+    from envs.evaluate import evaluate
+    from envs.policies import PolicyConfig
+    from envs.report import markdown_table
 
     if args.episodes < 1 or args.workers < 1:
-        parser.error("--episodes and --workers must be >= 1")
+        raise UsageError("--episodes and --workers must be >= 1")
+    out = check_writable_dir(args.out)
     config = CrowdNavConfig(scenario=DEMO_SCENARIO, n_pedestrians=DEMO_PEDESTRIANS, robot_visible=True)
     start = time.perf_counter()
     print(f"crowdnav demo: {DEMO_POLICY} on {DEMO_SCENARIO}, {DEMO_PEDESTRIANS} pedestrians in groups, "
           f"{args.episodes} episodes, {args.workers} workers", flush=True)
-    try:
-        result = evaluate(DEMO_POLICY, config, args.episodes, 0, args.workers, 1, args.out,
-                          predictor=args.predictor, stem="demo", progress=not args.no_progress)
-    except (ValueError, OSError) as exc:
-        return _fail(exc)
-    out = Path(args.out)
+    result = evaluate(PolicyConfig(DEMO_POLICY, predictor=args.predictor), config, args.episodes, 0, args.workers,
+                      1, out, stem="demo", progress=not args.no_progress)
     os.replace(out / "demo_seed0.rrd", out / "demo.rrd")
     result["run"]["files"] = ["demo.json", "demo.md", "demo.png", "demo.rrd"]
     write_json_atomic(out / "demo.json", result)
@@ -181,18 +206,32 @@ def _demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     return 0
 
 
+def _list(command: str) -> int:
+    if command == "policies":
+        from envs.policies import POLICIES
+
+        print("\n".join(POLICIES))
+    elif command == "scenarios":
+        print("\n".join(scenario_names()))
+    else:
+        from envs.suite import load_suite, suite_names
+
+        for name in suite_names():
+            s = load_suite(name)
+            print(f"{s.name} v{s.version}: " + ", ".join(f"{c.name} ({len(c.seeds)})" for c in s.cells))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command == "policies":
-        print("\n".join(policy_names()))
-        return 0
-    if args.command == "scenarios":
-        print("\n".join(scenario_names()))
-        return 0
-    if args.command == "evaluate":
-        return _evaluate(args, args.subparser)
-    return _demo(args, args.subparser)
+    run = {"evaluate": _evaluate, "benchmark": _benchmark, "demo": _demo}.get(args.command)
+    try:
+        return run(args) if run is not None else _list(args.command)
+    except (UsageError, ValueError, OSError) as exc:
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"crowdnav: error: {message}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from crowdsim import SCENARIOS, GroupConfig, SimConfig
+from envs.timing import DEFAULT_TIMING
 from planner import RobotConfig
 
 GROUP_SOURCES = ("truth", "predicted")
@@ -147,13 +148,14 @@ class CrowdNavConfig:
             raise ValueError(f"group_space_m must be finite and >= 0, got {self.group_space_m}")
         if not 0 <= self.warmup_s < math.inf or self.start_clearance_m < 0:
             raise ValueError("warmup_s and start_clearance_m must be finite and >= 0")
-        if abs(self.ticks_per_prediction_step * self.dt_s - 0.4) > 1e-9:
-            raise ValueError(f"dt_s must divide the 0.4 s prediction step, got {self.dt_s}")
+        step = DEFAULT_TIMING.step_s
+        if abs(self.ticks_per_prediction_step * self.dt_s - step) > 1e-9:
+            raise ValueError(f"dt_s must divide the {step} s prediction step, got {self.dt_s}")
 
     @property
     def ticks_per_prediction_step(self) -> int:
-        """Env steps per 0.4 s prediction step."""
-        return max(1, round(0.4 / self.dt_s))
+        """Env steps per prediction step (`envs.timing.DEFAULT_TIMING`, 0.4 s)."""
+        return max(1, round(DEFAULT_TIMING.step_s / self.dt_s))
 
     @property
     def max_steps(self) -> int:

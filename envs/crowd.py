@@ -109,4 +109,15 @@ def side_to_side(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray,
     return (start, goal) if rng.uniform() < 0.5 else (goal, start)
 
 
-ROUTES = {"circle_crossing": circle_route, "plaza": plaza_route}
+def street_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Crossing: along the west-east street (lateral offset within its middle two thirds), either direction,
+    through the intersection where the south-north flow crosses."""
+    half = float(dict(crowd.sim.scenario.options).get("half_length_m", 10.0))
+    w = float(dict(crowd.sim.scenario.options).get("width_m", 6.0)) / 2.0
+    x = half - crowd.route_margin_m
+    y0, y1 = rng.uniform(-w / 1.5, w / 1.5, 2)
+    start, goal = np.array([-x, y0]), np.array([x, y1])
+    return (start, goal) if rng.uniform() < 0.5 else (goal, start)
+
+
+ROUTES = {"circle_crossing": circle_route, "plaza": plaza_route, "crossing": street_route}

@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim import CrowdState
+from envs.attribution import collision_kind
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
@@ -30,7 +31,8 @@ from envs.history import PedHistory
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
 from envs.rewards import StepFacts, reward_terms, weighted
-from planner import clip_control, model_dims, step_robot
+from envs.timing import DEFAULT_TIMING, PredictionTiming
+from planner import RobotConfig, clip_control, model_dims, step_robot
 
 
 @dataclass(frozen=True)
@@ -43,6 +45,26 @@ class Pedestrians:
     radius: np.ndarray
     group_id: np.ndarray
     ped_id: np.ndarray
+
+
+@dataclass(frozen=True)
+class PlannerView:
+    """What a planner-based policy may read of the env at one step (copies; arrays in m, m/s, rad).
+
+    robot_state: (nz,) the planner's state (unicycle x, y, heading, v, omega; holonomic x, y, vx, vy).
+    goal: (2,). robot: the robot's `RobotConfig`. pedestrians: those in the scene now.
+    history: (obs_len, N, 2) their positions `timing.step_s` apart, the last row now (rows of `pedestrians`).
+    walls: (W, 4) wall segments x0, y0, x1, y1. timing: the prediction timing. dt_s: the env step, s.
+    """
+
+    robot_state: np.ndarray
+    goal: np.ndarray
+    robot: RobotConfig
+    pedestrians: Pedestrians
+    history: np.ndarray
+    walls: np.ndarray
+    timing: PredictionTiming
+    dt_s: float
 
 
 def make_crowd(cfg: CrowdNavConfig) -> Crowd:
@@ -76,7 +98,10 @@ class CrowdNavEnv(gym.Env):
         self.dims = model_dims(self.config.robot.model)
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.observation_space = observation_space(self.config)
-        self.history = PedHistory()
+        self.timing = DEFAULT_TIMING
+        self.history = PedHistory(self.timing.obs_len)
+        self._step_start: tuple[np.ndarray, CrowdState] | None = None
+        self._nearest_row = -1
         self._predictor = None
         self._pred_rng = np.random.default_rng(0)
         self.robot_state = np.zeros(self.dims.state_dim)
@@ -125,6 +150,7 @@ class CrowdNavEnv(gym.Env):
         # 1. apply action
         control = self.action_to_control(action)
         before_pos, before = self.robot_state[:2].copy(), self._state
+        self._step_start = (before_pos, before)
         dist_before = self._goal_distance()
         self.robot_state = step_robot(self.robot_state, control, cfg.dt_s, cfg.robot.model)
         # 2. simulate (the robot body moves along the step's chord)
@@ -173,8 +199,14 @@ class CrowdNavEnv(gym.Env):
         act = s.active
         return Pedestrians(s.pos[act], s.vel[act], s.radius[act], s.group_id[act], s.ped_id[act])
 
+    def planner_view(self) -> PlannerView:
+        """The typed view planner-based policies read (see `PlannerView`)."""
+        return PlannerView(self.robot_state.copy(), self.goal.copy(), self.config.robot, self.pedestrians(),
+                           self.history_window(), np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing,
+                           self.config.dt_s)
+
     def history_window(self) -> np.ndarray:
-        """(8, N, 2) m positions of `pedestrians()` 0.4 s apart, the last row being now. On a 0.4 s tick the
+        """(obs_len = 8, N, 2) m positions of `pedestrians()` 0.4 s apart, the last row being now. On a 0.4 s tick the
         rows are the recorded snapshots; between ticks each row is interpolated linearly between the two
         snapshots around its time (the newest interval ends at the current positions). A pedestrian seen for
         less than 2.8 s is padded backwards with its earliest position."""
@@ -296,6 +328,7 @@ class CrowdNavEnv(gym.Env):
             swept = swept_distances(before_pos, here, before.pos[rows], s.pos[rows]) - s.radius[rows] - r
             surface[both] = np.minimum(surface[both], swept)
         min_surface = float(surface.min()) if len(surface) else float("inf")
+        self._nearest_row = int(np.flatnonzero(s.active)[np.argmin(surface)]) if len(surface) else -1
         hit_wall = bool(len(self.crowd.walls)) and float(point_segment_distances(here, self.crowd.walls).min()) < r
         intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
                                          cfg.group_span_m, centre))
@@ -303,11 +336,21 @@ class CrowdNavEnv(gym.Env):
         return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m, hit_wall, min_surface,
                          intruding)
 
+    def _collision_kind(self) -> str:
+        """The kind of this step's pedestrian contact (`envs.attribution`): the pedestrian nearest along the step
+        (`_facts`), new when its slot held nobody or somebody else at the step's start."""
+        before_pos, before = self._step_start
+        s, here, row = self._state, self.robot_state[:2], self._nearest_row
+        new = not (before.active[row] and before.ped_id[row] == s.ped_id[row])
+        robot_vel = (here - before_pos) / self.config.dt_s
+        return collision_kind(here, robot_vel, s.pos[row], s.vel[row], new)
+
     def _finish(self, facts: StepFacts, truncated: bool) -> None:
         m = self.metrics
         if facts.collided:
-            m.collision = True
+            m.collision, m.collision_time_s = True, m.time_s
             m.collision_with = "wall" if facts.hit_wall and facts.min_surface_distance_m >= 0 else "pedestrian"
+            m.collision_kind = self._collision_kind() if m.collision_with == "pedestrian" else "robot"
         elif facts.reached_goal:
             m.success, m.time_to_goal_s = True, m.time_s
         elif truncated:

@@ -6,13 +6,13 @@ from collections import deque
 
 import numpy as np
 
-OBS_LEN = 8  # observed steps the predictor takes
+from envs.timing import DEFAULT_TIMING
 
 
 class PedHistory:
     """The last `length` snapshots (ped ids (n,), positions (n, 2) m), one per 0.4 s tick."""
 
-    def __init__(self, length: int = OBS_LEN) -> None:
+    def __init__(self, length: int = DEFAULT_TIMING.obs_len) -> None:
         self.length = length
         self._snaps: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=length)
 

@@ -20,8 +20,9 @@ import numpy as np
 from gymnasium import spaces
 
 from envs.config import CrowdNavConfig
+from envs.timing import DEFAULT_TIMING
 
-PRED_LEN = 12
+PRED_LEN = DEFAULT_TIMING.pred_len
 
 
 def observation_space(cfg: CrowdNavConfig) -> spaces.Dict:

@@ -1,26 +1,31 @@
-"""Planner-in-the-loop policies for `CrowdNavEnv`, behind one small registry.
+"""Policies for `CrowdNavEnv`: one constructor (`PolicyConfig` -> `make_policy`), a small registry, plug-ins.
 
-Each policy maps the env's internal state (robot state, goal, pedestrians, their 0.4 s history, walls)
-to an action in [-1, 1]^2; `act(obs, env)` also accepts the observation for API symmetry with learned
-policies. The MPC policies re-plan every `REPLAN_EVERY_STEPS` env steps (every 0.1 s step by default) from a
-history of 0.4 s-spaced positions that ends now, and hold the first planned control in between; the env clips
-it to the accelerations reachable per env step.
+Registry names:
 
-    mpc-gpgraph   MPC + the shipped synthetic GP-Graph (K=20 samples, its own predicted groups)
+    mpc-gpgraph   MPC + a GP-Graph predictor (default the shipped synthetic one): K samples, its own groups
     mpc-cv        MPC + constant-velocity prediction, every pedestrian its own group
     mpc-none      MPC with pedestrians frozen where they stand (no prediction), no groups
     social-force  reactive social-force robot (every env step)
     random        uniform random actions (a baseline and a benchmark load)
+
+Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.plugins`) or `sb3:PATH.zip`
+(a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
+Planner policies read the env through its typed `PlannerView`; they re-plan every `replan_every_steps` env
+steps from a history of 0.4 s-spaced positions that ends now and hold the planned control in between (the env
+clips it to the accelerations reachable per env step).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any, Protocol
 
 import numpy as np
 
-from envs.env import CrowdNavEnv
+from envs.env import CrowdNavEnv, PlannerView
+from envs.plugins import SB3_PREFIX, SB3Policy, is_plugin, load_factory
+from envs.timing import PredictionTiming
 from planner import (
     ConstantVelocityMPC,
     FrozenMPC,
@@ -42,11 +47,63 @@ ENV_MPC = MPCConfig(safety_margin_m=0.3, check_midpoints=True)
 # now (`CrowdNavEnv.history_window`), so any interval works; the plan keeps its 0.4 s step. Re-planning every
 # 0.1 s step removed the remaining collisions of re-planning every 0.4 s on the tuning seeds (RESULTS.md).
 REPLAN_EVERY_STEPS = 1
+PREDICTOR_POLICIES = ("mpc-gpgraph",)  # registry policies that take `PolicyConfig.predictor`
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    """Everything that makes a policy; the only way one is built (`make_policy`) and recorded with results.
+
+    name: a registry name (`POLICIES`), `module:factory` or `sb3:PATH.zip` / `sb3:ALGO:PATH.zip`.
+    mpc: the planner settings of the MPC policies (the robot's limits are replaced by the env's).
+    replan_every_steps: env steps between re-plans (planner policies).
+    predictor: for mpc-gpgraph (and plug-ins that want one): a predictor name, checkpoint path or
+        `module:factory`; None is the shipped default. Setting it for a policy that ignores it is an error.
+    n_samples: predicted samples per plan (K).
+    threads: torch threads in the process (predictor, SB3).
+    deterministic: SB3 agents act deterministically.
+    """
+
+    name: str = "mpc-gpgraph"
+    mpc: MPCConfig = field(default_factory=lambda: ENV_MPC)
+    replan_every_steps: int = REPLAN_EVERY_STEPS
+    predictor: str | None = None
+    n_samples: int = 20
+    threads: int = 1
+    deterministic: bool = True
+
+    def __post_init__(self) -> None:
+        plug = is_plugin(self.name) or self.name.startswith(SB3_PREFIX)
+        if not plug and self.name not in POLICIES:
+            raise ValueError(f"unknown policy {self.name!r}; valid names: {', '.join(POLICIES)}, "
+                             "module:factory or sb3:PATH.zip")
+        if self.predictor is not None and not (self.name in PREDICTOR_POLICIES or is_plugin(self.name)):
+            raise ValueError(f"policy {self.name!r} takes no predictor (only {', '.join(PREDICTOR_POLICIES)} "
+                             "and module:factory policies do)")
+        for key in ("replan_every_steps", "n_samples", "threads"):
+            if not isinstance(getattr(self, key), int) or getattr(self, key) < 1:
+                raise ValueError(f"PolicyConfig.{key} must be an integer >= 1, got {getattr(self, key)!r}")
+
+    def to_json(self) -> dict[str, Any]:
+        """The whole config as JSON-ready data (goes into every results file)."""
+        return _json_safe(asdict(self))
+
+
+def _json_safe(obj: Any) -> Any:
+    """obj with tuples as lists and non-finite floats as the strings "inf", "-inf", "nan" (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return str(obj)
+    return obj if obj is None or isinstance(obj, bool | int | float | str) else str(obj)
 
 
 class Policy(Protocol):
+    """What the env's runners need of a policy (`stats` is optional)."""
+
     name: str
-    stats: PlanStats
 
     def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
         """Start an episode (after env.reset)."""
@@ -55,14 +112,10 @@ class Policy(Protocol):
         """The action (2,) float32 in [-1, 1] for the current step."""
 
 
-def _walls(env: CrowdNavEnv) -> np.ndarray:
-    return np.asarray(env.crowd.walls, float).reshape(-1, 4)
-
-
 class PlannerPolicy:
-    """A planner re-planning every `replan_every_steps` env steps; `predict(env)` builds the `PedPrediction`."""
+    """A planner re-planning every `replan_every_steps` env steps; `predict(view)` builds the `PedPrediction`."""
 
-    def __init__(self, name: str, planner, predict: Callable[[CrowdNavEnv], PedPrediction],
+    def __init__(self, name: str, planner: Any, predict: Callable[[PlannerView], PedPrediction],
                  replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
         if replan_every_steps < 1:
             raise ValueError(f"replan_every_steps must be >= 1, got {replan_every_steps}")
@@ -82,8 +135,9 @@ class PlannerPolicy:
     def act(self, obs: dict[str, np.ndarray] | None, env: CrowdNavEnv) -> np.ndarray:
         if self._control is None or self._age >= self.replan_every_steps:
             self._age = 0
-            prediction = self._predict(env)
-            result = self.planner.plan(env.robot_state, env.goal, prediction, _walls(env))
+            view = env.planner_view()
+            prediction = self._predict(view)
+            result = self.planner.plan(view.robot_state, view.goal, prediction, view.walls)
             self._control = result.control
             samples = prediction.positions if prediction.n_peds else None
             env.annotate(plan=result.states[:, :2], predictions=samples,
@@ -92,43 +146,50 @@ class PlannerPolicy:
         return env.control_to_action(self._control)
 
 
+def load_predictor_spec(spec: str | None, threads: int = 1) -> Any:
+    """A predictor from a name or checkpoint (`predictor.load_predictor`) or a `module:factory` plug-in."""
+    if spec is not None and is_plugin(spec):
+        return load_factory(spec)()
+    from predictor import load_predictor, set_threads  # lazy: torch only for predictor policies
+
+    set_threads(threads)
+    return load_predictor(spec or DEFAULT_PREDICTOR)
+
+
 class GPGraphPolicy(PlannerPolicy):
-    """MPC + GP-Graph samples and the model's group assignment."""
+    """MPC + a predictor's samples and group assignment (GP-Graph by default)."""
 
-    def __init__(self, config: MPCConfig, predictor: str = DEFAULT_PREDICTOR, n_samples: int = 20,
-                 threads: int = 1) -> None:
-        from predictor import load_predictor, set_threads  # lazy: torch only for this policy
-
-        set_threads(threads)
-        self.predictor = load_predictor(predictor)
+    def __init__(self, config: MPCConfig, predictor: str | None = DEFAULT_PREDICTOR, n_samples: int = 20,
+                 threads: int = 1, replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
+        self.predictor = load_predictor_spec(predictor, threads)
+        self.timing = PredictionTiming.of(self.predictor)
         self.n_samples = n_samples
         self.rng = np.random.default_rng(0)
-        super().__init__("mpc-gpgraph", MPCPlanner(config), self._gpgraph)
+        super().__init__("mpc-gpgraph", MPCPlanner(config), self._gpgraph, replan_every_steps)
 
     def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
+        env.timing.check_matches(self.timing, "the predictor")
         super().reset(env, seed)
         self.rng = np.random.default_rng(seed)
 
-    def _gpgraph(self, env: CrowdNavEnv) -> PedPrediction:
-        p = env.pedestrians()
+    def _gpgraph(self, view: PlannerView) -> PedPrediction:
+        p = view.pedestrians
         if len(p.pos) == 0:
-            return empty_prediction()
-        hist = env.history_window()
-        pred = self.predictor.predict(hist, n_samples=self.n_samples, rng=self.rng)
+            return empty_prediction(view.timing.pred_len, view.timing.step_s)
+        pred = self.predictor.predict(view.history, n_samples=self.n_samples, rng=self.rng)
         return PedPrediction(pred.samples, p.radius, pred.group_id, np.ones(len(p.pos), bool),
-                             current=p.pos, history=hist)
+                             current=p.pos, history=view.history, step_s=view.timing.step_s)
 
 
-def singleton_prediction(env: CrowdNavEnv) -> PedPrediction:
+def singleton_prediction(view: PlannerView) -> PedPrediction:
     """The observed history as a (placeholder) prediction with every pedestrian its own group; the
     baseline planners replace the positions (constant velocity, frozen)."""
-    p = env.pedestrians()
+    p, t = view.pedestrians, view.timing
     if len(p.pos) == 0:
-        return empty_prediction()
-    hist = env.history_window()
+        return empty_prediction(t.pred_len, t.step_s)
     n = len(p.pos)
-    return PedPrediction(np.repeat(p.pos[None, None], 12, axis=1), p.radius, np.arange(n), np.ones(n, bool),
-                         current=p.pos, history=hist)
+    return PedPrediction(np.repeat(p.pos[None, None], t.pred_len, axis=1), p.radius, np.arange(n),
+                         np.ones(n, bool), current=p.pos, history=view.history, step_s=t.step_s)
 
 
 class RandomPolicy:
@@ -147,25 +208,28 @@ class RandomPolicy:
         return self.rng.uniform(-1.0, 1.0, 2).astype(np.float32)
 
 
-def _mpc_config(env: CrowdNavEnv, config: MPCConfig | None) -> MPCConfig:
-    from dataclasses import replace
+def _planner(name: str, planner_cls: type, every: int | None = None) -> Callable[[PolicyConfig, MPCConfig], Policy]:
+    return lambda cfg, mpc: PlannerPolicy(name, planner_cls(mpc), singleton_prediction,
+                                          every or cfg.replan_every_steps)
 
-    return replace(config or ENV_MPC, robot=env.config.robot)
 
-
-POLICIES: dict[str, Callable[[CrowdNavEnv, MPCConfig | None], Policy]] = {
-    "mpc-gpgraph": lambda env, cfg: GPGraphPolicy(_mpc_config(env, cfg)),
-    "mpc-cv": lambda env, cfg: PlannerPolicy("mpc-cv", ConstantVelocityMPC(_mpc_config(env, cfg)),
-                                             singleton_prediction),
-    "mpc-none": lambda env, cfg: PlannerPolicy("mpc-none", FrozenMPC(_mpc_config(env, cfg)), singleton_prediction),
-    "social-force": lambda env, cfg: PlannerPolicy("social-force", SocialForcePlanner(_mpc_config(env, cfg)),
-                                                   singleton_prediction, replan_every_steps=1),
-    "random": lambda env, cfg: RandomPolicy(),
+POLICIES: dict[str, Callable[[PolicyConfig, MPCConfig], Policy]] = {
+    "mpc-gpgraph": lambda cfg, mpc: GPGraphPolicy(mpc, cfg.predictor, cfg.n_samples, cfg.threads,
+                                                  cfg.replan_every_steps),
+    "mpc-cv": _planner("mpc-cv", ConstantVelocityMPC),
+    "mpc-none": _planner("mpc-none", FrozenMPC),
+    "social-force": _planner("social-force", SocialForcePlanner, every=1),
+    "random": lambda cfg, mpc: RandomPolicy(),
 }
 
 
-def make_policy(name: str, env: CrowdNavEnv, config: MPCConfig | None = None) -> Policy:
-    """A policy by name for this env (its robot limits); unknown names raise listing the valid ones."""
-    if name not in POLICIES:
-        raise ValueError(f"unknown policy {name!r}; valid names: {', '.join(POLICIES)}")
-    return POLICIES[name](env.unwrapped if hasattr(env, "unwrapped") else env, config)
+def make_policy(spec: str | PolicyConfig, env: CrowdNavEnv) -> Policy:
+    """The policy a `PolicyConfig` (or a bare name: its defaults) describes, for this env (its robot limits).
+    Unknown names raise ValueError listing the valid ones."""
+    cfg = spec if isinstance(spec, PolicyConfig) else PolicyConfig(name=spec)
+    env = env.unwrapped if hasattr(env, "unwrapped") else env
+    if cfg.name.startswith(SB3_PREFIX):
+        return SB3Policy(cfg.name, env, cfg.deterministic, cfg.threads)
+    if is_plugin(cfg.name):
+        return load_factory(cfg.name)(cfg, env)
+    return POLICIES[cfg.name](cfg, replace(cfg.mpc, robot=env.config.robot))

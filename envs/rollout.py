@@ -10,7 +10,7 @@ import numpy as np
 
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
-from envs.policies import make_policy
+from envs.policies import PolicyConfig, make_policy
 
 
 @dataclass
@@ -34,13 +34,14 @@ class EpisodeResult:
     wall_time_s: float = 0.0
 
 
-def run_episode(config: CrowdNavConfig, policy_name: str, seed: int, keep_scene: bool = False,
+def run_episode(config: CrowdNavConfig, policy_spec: str | PolicyConfig, seed: int, keep_scene: bool = False,
                 observer: Any = None, env: CrowdNavEnv | None = None, policy: Any = None) -> EpisodeResult:
-    """Reset with `seed`, act with the named policy until the episode ends. `observer.log(frame)` (e.g. a
-    `RerunObserver`) receives every frame. Pass env/policy to reuse them across episodes."""
+    """Reset with `seed`, act with the policy (a name or `PolicyConfig`; or `policy`, already built) until the
+    episode ends. `observer.log(frame)` (e.g. a `RerunObserver`) receives every frame. Pass env/policy to reuse
+    them across episodes."""
     start = time.perf_counter()
     env = env or CrowdNavEnv(config)
-    policy = policy or make_policy(policy_name, env)
+    policy = policy or make_policy(policy_spec, env)
     obs, _ = env.reset(seed=seed)
     policy.reset(env, seed)
     calls0, fallbacks0, times0 = _counts(policy)
@@ -71,6 +72,9 @@ def run_episode(config: CrowdNavConfig, policy_name: str, seed: int, keep_scene:
 
 
 def _counts(policy: Any) -> tuple[int, int, list[float]]:
-    stats = policy.stats
+    """(plans, fallbacks, solve times s) so far; zeros for a policy without `stats` (e.g. a plug-in)."""
+    stats = getattr(policy, "stats", None)
+    if stats is None:
+        return 0, 0, []
     fallbacks = sum(v for k, v in stats.counts.items() if k.startswith("fallback_"))
     return stats.counts["calls"], fallbacks, list(stats.solve_times_s)

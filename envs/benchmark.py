@@ -1,0 +1,98 @@
+"""`run_benchmark`: every policy on every episode of a suite's cells, resumable, then the leaderboard.
+
+Records go to `<out>/records.jsonl` as episodes finish (`envs.records.RecordStore`); a rerun with the same
+`--out` skips the episodes already recorded (a killed run resumes), and `merge` adds record files made
+elsewhere (another machine, a Ray cluster). The leaderboard and the paired comparisons are rebuilt from all
+records at the end (`envs.leaderboard`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from envs.atomic import check_writable_dir
+from envs.evaluate import check_setup
+from envs.policies import PolicyConfig
+from envs.records import EpisodeRecord, RecordStore, merge_records, read_records
+from envs.runner import EpisodeTask, fingerprint, run_tasks
+from envs.suite import DEFAULT_DATA, Cell, Suite
+
+RECORDS = "records.jsonl"
+
+
+@dataclass(frozen=True)
+class BenchmarkPlan:
+    """What a run will do: all tasks of the selection, and those not yet recorded."""
+
+    tasks: tuple[EpisodeTask, ...]
+    todo: tuple[EpisodeTask, ...]
+    done: tuple[EpisodeRecord, ...]
+
+
+def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig) -> str:
+    """What an episode's record depends on: the suite version, the cell's definition and the policy config."""
+    return fingerprint(suite.name, suite.version, cell.spec, cell.defaults, policy.to_json())
+
+
+def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[PolicyConfig], out: Path,
+                   data: Path = DEFAULT_DATA, recorded: Sequence[EpisodeRecord] = ()) -> BenchmarkPlan:
+    """The tasks of cells x policies x seeds and which of them are already `recorded` (records of the output
+    folder and merged files). A record of the same episode made under other settings raises ValueError."""
+    names = [p.name for p in policies]
+    if len(set(names)) != len(names):
+        raise ValueError(f"a policy is named twice: {names}")
+    existing = {r.key: r for r in recorded}
+    tasks, todo, done = [], [], []
+    for cell in cells:
+        for pcfg in policies:
+            fp = episode_fingerprint(suite, cell, pcfg)
+            for seed in cell.seeds:
+                task = EpisodeTask(cell.env_config(seed, data), pcfg, seed, cell=cell.name, fingerprint=fp,
+                                   error_dir=str(Path(out) / "errors"))
+                tasks.append(task)
+                old = existing.get((cell.name, pcfg.name, seed))
+                if old is None:
+                    todo.append(task)
+                elif old.fingerprint != fp:
+                    raise ValueError(f"the records hold {cell.name}/{pcfg.name}/seed {seed} run under other "
+                                     "settings (another suite version or policy config); use a new --out folder")
+                else:
+                    done.append(old)
+    return BenchmarkPlan(tuple(tasks), tuple(todo), tuple(done))
+
+
+def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[PolicyConfig], out: str | Path, *,
+                  data: Path = DEFAULT_DATA, workers: int = 1, backend: str = "local", address: str | None = None,
+                  merge: Sequence[Path] = (), progress: bool = True) -> dict[str, Any]:
+    """Run what is missing, then write the leaderboard from every record of the selection. Returns the
+    leaderboard JSON (see `envs.leaderboard.leaderboard`) with `run` (episodes run / resumed, wall time)."""
+    from tqdm.auto import tqdm
+
+    from envs.leaderboard import leaderboard, write_leaderboard
+
+    out = check_writable_dir(out)
+    suite.check_data(list(cells), data)
+    store = RecordStore(out / RECORDS)
+    recorded = merge_records([store.read(), *(read_records(p) for p in merge)])  # bad files fail here
+    plan = plan_benchmark(suite, cells, policies, out, data, recorded)
+    for pcfg in {t.policy.name: t.policy for t in plan.todo}.values():  # a bad plug-in fails here, not per episode
+        check_setup(pcfg, plan.todo[0].env)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    with tqdm(total=len(plan.tasks), initial=len(plan.done), desc=suite.name, unit="ep",
+              disable=not progress) as bar:
+        for _, res in run_tasks(plan.todo, workers, backend, address):
+            store.append(res["record"])
+            bar.update(1)
+    wall = time.perf_counter() - start
+    wanted = {(t.cell, t.policy.name, t.seed) for t in plan.tasks}
+    records = [r for r in merge_records([recorded, store.read()]) if r.key in wanted]
+    board = leaderboard(suite, list(cells), list(policies), records)
+    board["run"] = {"episodes_run": len(plan.todo), "episodes_resumed": len(plan.done), "workers": workers,
+                    "backend": backend, "wall_time_s": wall, "merged_files": [str(p) for p in merge]}
+    write_leaderboard(board, out)
+    return board

@@ -1,0 +1,154 @@
+"""The benchmark leaderboard: policies x cells with Wilson intervals, pooled real and synthetic columns, and
+paired comparisons of every two policies on the same episodes (exact McNemar; paired bootstrap for path length).
+
+Files in the output folder: `leaderboard.json`, `leaderboard.md`, `leaderboard.png`.
+"""
+
+from __future__ import annotations
+
+from itertools import combinations
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from envs.atomic import write_json_atomic, write_text_atomic
+from envs.policies import PolicyConfig
+from envs.records import EpisodeRecord
+from envs.report import fmt, pyplot, save_figure
+from envs.stats import aggregate, paired_comparison
+from envs.suite import Cell, Suite
+
+POOLS = ("real", "synthetic", "all")
+
+
+def _pool(cells: list[Cell], pool: str) -> set[str]:
+    return {c.name for c in cells if pool == "all" or c.is_real == (pool == "real")}
+
+
+def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig],
+                records: list[EpisodeRecord]) -> dict[str, Any]:
+    """JSON-ready: per cell and pool, each policy's `envs.stats.aggregate` (without per-episode data), and the
+    paired comparisons of every policy pair per pool (pairs matched by cell and seed)."""
+    by: dict[tuple[str, str], list[EpisodeRecord]] = {}
+    for r in records:
+        by.setdefault((r.cell, r.policy), []).append(r)
+    names = [p.name for p in policies]
+    board: dict[str, Any] = {
+        "suite": suite.name, "version": suite.version, "description": suite.description,
+        "policies": {p.name: p.to_json() for p in policies},
+        "cells": {c.name: {"spec": c.spec, "seeds": [c.seeds[0], c.seeds[-1]], "results": {}} for c in cells},
+        "pooled": {}, "paired": {},
+    }
+    for c in cells:
+        for name in names:
+            recs = by.get((c.name, name), [])
+            board["cells"][c.name]["results"][name] = aggregate(recs) if recs else None
+    for pool in POOLS:
+        members = _pool(cells, pool)
+        if not members:
+            continue
+        pooled = {n: [r for (cell, pol), rs in by.items() if cell in members and pol == n for r in rs] for n in names}
+        board["pooled"][pool] = {n: aggregate(rs) if rs else None for n, rs in pooled.items()}
+        board["paired"][pool] = [paired_comparison(pooled[a], pooled[b]) for a, b in combinations(names, 2)
+                                 if pooled[a] and pooled[b]]
+    return board
+
+
+def _cell_rate(res: dict[str, Any] | None, key: str) -> str:
+    if res is None or res[key] is None:
+        return "–"
+    ci = res[f"{key}_ci95"]
+    return f"{res[key]:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]"
+
+
+def _matrix(board: dict[str, Any], key: str, title: str) -> list[str]:
+    names = list(board["policies"])
+    lines = [f"### {title}", "", "| cell | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for cell, entry in board["cells"].items():
+        lines.append(f"| {cell} | " + " | ".join(_cell_rate(entry["results"][n], key) for n in names) + " |")
+    for pool, res in board["pooled"].items():
+        lines.append(f"| **pooled {pool}** | " + " | ".join(_cell_rate(res[n], key) for n in names) + " |")
+    return [*lines, ""]
+
+
+def _summary(board: dict[str, Any]) -> list[str]:
+    lines = ["### Pooled summary", "", "| pool | policy | episodes | errors | success | collision | avoidable coll. "
+             "| kinds robot/ped/spawn | timeout | group intrusion | time to goal (s) | plan p50/p95 (ms) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for pool, res in board["pooled"].items():
+        for name, r in res.items():
+            if r is None:
+                continue
+            lines.append(
+                f"| {pool} | {name} | {r['episodes']} | {r['errors']} | {_cell_rate(r, 'success_rate')} | "
+                f"{_cell_rate(r, 'collision_rate')} | {_cell_rate(r, 'avoidable_collision_rate')} | "
+                f"{r['collisions_robot']}/{r['collisions_pedestrian']}/{r['collisions_spawn']} | "
+                f"{fmt(r['timeout_rate'])} | {fmt(r['group_intrusion_rate'])} | {fmt(r['time_to_goal_s'])} | "
+                f"{fmt(r['solve_time_p50_ms'], 1)}/{fmt(r['solve_time_p95_ms'], 1)} |")
+    return [*lines, ""]
+
+
+def _paired(board: dict[str, Any]) -> list[str]:
+    lines = ["### Paired comparisons (same episodes; exact McNemar, two-sided, alpha 0.05)", "",
+             "| pool | A vs B | pairs | collisions A/B (A only, B only) | p | avoidable A/B | p | "
+             "successes A/B | p | path A-B (m) [95% CI] |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for pool, comps in board["paired"].items():
+        for c in comps:
+            def cnt(k: str, c: dict[str, Any] = c) -> str:
+                e = c[k]
+                mark = " *" if e["significant"] else ""
+                return f"{e['a']}/{e['b']} ({e['a_only']}, {e['b_only']}) | {e['p_value']:.3g}{mark}"
+            path = c.get("path_length_m")
+            ptxt = (f"{path['mean_diff']:+.2f} [{path['ci95'][0]:+.2f}, {path['ci95'][1]:+.2f}]"
+                    f"{' *' if path['significant'] else ''}") if path else "–"
+            lines.append(f"| {pool} | {c['policy_a']} vs {c['policy_b']} | {c['pairs']} | {cnt('collision')} | "
+                         f"{cnt('avoidable_collision')} | {cnt('success')} | {ptxt} |")
+    lines.append("")
+    lines.append("`*`: significant at alpha = 0.05 (no correction for the number of comparisons).")
+    return [*lines, ""]
+
+
+def leaderboard_markdown(board: dict[str, Any]) -> str:
+    """The leaderboard as markdown: pooled summary, collision and success matrices, paired comparisons."""
+    head = [f"## Leaderboard: suite {board['suite']} v{board['version']}", "", board["description"], ""]
+    body = (_summary(board) + _matrix(board, "collision_rate", "Collision rate [95% Wilson CI]")
+            + _matrix(board, "avoidable_collision_rate", "Avoidable collision rate (robot + pedestrian kinds)")
+            + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + _paired(board))
+    return "\n".join(head + body)
+
+
+def leaderboard_png(board: dict[str, Any], path: str | Path) -> None:
+    """Two panels (success, collision): one group of bars per cell and pool, a bar per policy, Wilson CIs."""
+    plt = pyplot()
+    names = list(board["policies"])
+    rows = [(c, e["results"]) for c, e in board["cells"].items()] + \
+        [(f"pooled {p}", r) for p, r in board["pooled"].items()]
+    fig, axes = plt.subplots(2, 1, figsize=(max(8.0, 0.55 * len(rows) * max(1, len(names)) / 2), 7.5), sharex=True)
+    width = 0.8 / len(names)
+    x = np.arange(len(rows))
+    for ax, key in zip(axes, ("success_rate", "collision_rate"), strict=True):
+        for j, name in enumerate(names):
+            vals, err = np.zeros(len(rows)), np.zeros((2, len(rows)))
+            for i, (_, res) in enumerate(rows):
+                r = res.get(name)
+                if r is not None and r[key] is not None:
+                    vals[i] = r[key]
+                    err[:, i] = [r[key] - r[f"{key}_ci95"][0], r[f"{key}_ci95"][1] - r[key]]
+            ax.bar(x + (j - (len(names) - 1) / 2) * width, vals, width, yerr=np.maximum(err, 0.0), capsize=2,
+                   label=name)
+        ax.set_ylabel(key.replace("_", " ") + " (95% CI)")
+        ax.set_ylim(0, 1.05)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=len(names))
+    axes[1].set_xticks(x, [r[0] for r in rows], rotation=60, ha="right", fontsize=7)
+    fig.suptitle(f"suite {board['suite']} v{board['version']}", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def write_leaderboard(board: dict[str, Any], out: Path) -> None:
+    write_json_atomic(Path(out) / "leaderboard.json", board)
+    write_text_atomic(Path(out) / "leaderboard.md", leaderboard_markdown(board) + "\n")
+    leaderboard_png(board, Path(out) / "leaderboard.png")

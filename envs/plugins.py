@@ -1,0 +1,106 @@
+"""User plug-ins: policies and predictors named `module:factory`, and stable-baselines3 agents (`sb3:PATH.zip`).
+
+Protocols (also in the README):
+
+    Policy      name: str; reset(env, seed) -> None; act(obs, env) -> action (2,) in [-1, 1];
+                optional `stats` (a `planner.PlanStats`) for plan/fallback/solve-time counts.
+                A policy factory is called as factory(config: PolicyConfig, env: CrowdNavEnv).
+    Predictor   predict(history (obs_len, N, 2) m, n_samples: int, rng: np.random.Generator) -> an object with
+                `samples` (K, pred_len, N, 2) m and `group_id` (N,); optional attributes step_s, obs_len, pred_len
+                (default 0.4 s, 8, 12). A predictor factory is called with no arguments.
+
+SB3 agents load without unpickling Python objects from the file: the entries SB3 would unpickle are replaced
+(spaces by the env's, schedules by constants) and the weights load with `weights_only=True`; an agent whose
+settings need unpickling (e.g. a custom activation class in policy_kwargs) is refused with a clear error.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import re
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+PLUGIN_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
+SB3_PREFIX = "sb3:"
+SB3_ALGOS = ("PPO", "A2C", "SAC", "TD3", "DDPG")
+_SAFE_REPLACEMENTS = ("observation_space", "action_space", "lr_schedule", "learning_rate", "clip_range",
+                      "clip_range_vf", "exploration_schedule", "_last_obs", "_last_episode_starts",
+                      "_last_original_obs", "_episode_storage")
+
+
+def is_plugin(spec: str) -> bool:
+    """Whether `spec` names a `module:factory` plug-in."""
+    return bool(PLUGIN_RE.match(spec))
+
+
+def load_factory(spec: str) -> Any:
+    """The callable `factory` of `module:factory`; ValueError when the module or the name is missing."""
+    if not is_plugin(spec):
+        raise ValueError(f"plug-in {spec!r} must look like module:factory")
+    module_name, attr = spec.split(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ValueError(f"plug-in {spec!r}: cannot import module {module_name!r} ({exc})") from exc
+    factory = getattr(module, attr, None)
+    if not callable(factory):
+        raise ValueError(f"plug-in {spec!r}: module {module_name!r} has no callable {attr!r}")
+    return factory
+
+
+def parse_sb3(spec: str) -> tuple[str, Path]:
+    """(algorithm, path) of `sb3:PATH.zip` (PPO) or `sb3:ALGO:PATH.zip`; ValueError when malformed."""
+    rest = spec[len(SB3_PREFIX):]
+    algo, _, tail = rest.partition(":")
+    if tail and algo.upper() in SB3_ALGOS:
+        algo, path = algo.upper(), Path(tail)
+    else:
+        algo, path = "PPO", Path(rest)
+    if path.suffix != ".zip":
+        raise ValueError(f"{spec!r}: expected sb3:PATH.zip or sb3:ALGO:PATH.zip (ALGO one of {', '.join(SB3_ALGOS)})")
+    return algo, path
+
+
+class SB3Policy:
+    """A stable-baselines3 agent acting on the env's observation (deterministic by default)."""
+
+    def __init__(self, spec: str, env: Any, deterministic: bool = True, threads: int = 1) -> None:
+        algo, path = parse_sb3(spec)
+        if not path.is_file():
+            raise ValueError(f"{spec!r}: no such file {path}")
+        try:
+            with zipfile.ZipFile(path) as z:
+                data = json.loads(z.read("data"))
+        except (zipfile.BadZipFile, KeyError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path}: not a stable-baselines3 model file ({exc})") from exc
+        pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
+        unsafe = [k for k in pickled if k not in _SAFE_REPLACEMENTS]
+        if unsafe:
+            raise ValueError(f"{path}: settings {unsafe} would need unpickling Python objects; refusing to load")
+        import stable_baselines3
+        import torch
+
+        torch.set_num_threads(threads)
+        custom = {k: (lambda _: 0.0) for k in pickled}
+        custom.update(observation_space=env.observation_space, action_space=env.action_space)
+        try:
+            self.model = getattr(stable_baselines3, algo).load(path, custom_objects=custom, device="cpu")
+        except (ValueError, RuntimeError, KeyError) as exc:
+            raise ValueError(f"{path}: cannot load as {algo} for this env ({exc})") from exc
+        self.name, self.deterministic = f"sb3:{path.stem}", deterministic
+        try:  # a model trained on another observation layout fails here, not mid-episode
+            self.model.predict(env.observation_space.sample(), deterministic=True)
+        except (ValueError, RuntimeError, KeyError) as exc:
+            raise ValueError(f"{path}: the agent does not fit this env's observation space ({exc})") from exc
+
+    def reset(self, env: Any, seed: int | None = None) -> None:
+        pass
+
+    def act(self, obs: dict[str, np.ndarray], env: Any) -> np.ndarray:
+        action, _ = self.model.predict(obs, deterministic=self.deterministic)
+        return np.asarray(action, np.float32).reshape(2)

@@ -1,0 +1,160 @@
+"""The typed per-episode record, its JSON form, and the append-only JSONL store behind resumable benchmarks.
+
+A record file holds one JSON object per line. `RecordStore.append` writes a line atomically (one O_APPEND
+write, fsync), so a killed run leaves complete lines plus at most one partial last line, which `read_records`
+skips; a resumed run then redoes only the episodes that have no record. Records of the same episode made on
+several machines merge when they agree on the episode's fingerprint (suite, cell and policy settings).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from envs.atomic import append_line
+
+OUTCOMES = ("success", "collision", "timeout", "error")
+# How a collision came about (`envs.attribution`): the robot moved into a pedestrian or wall; a pedestrian walked
+# into a stopped or retreating robot; a replayed track began within contact distance of the robot.
+COLLISION_KINDS = ("robot", "pedestrian", "spawn")
+AVOIDABLE_KINDS = ("robot", "pedestrian")
+
+
+def finite_or_none(value: Any) -> float | None:
+    """value as a float, or None when it is missing, NaN or infinite (JSON has no NaN/inf)."""
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """One episode of one policy. Times s, distances m; None where a value does not exist (e.g. time to goal
+    of a failed episode, min distance when nobody was ever in the scene).
+
+    outcome: "success" | "collision" | "timeout" | "error" (the policy raised; `error` has the message).
+    collision_with: "pedestrian" | "wall" | None. collision_kind: one of `COLLISION_KINDS` or None.
+    collision_time_s: time of the (first, episode-ending) collision. plans/fallbacks: planner calls and
+    fallbacks; solve_times_ms: every solver call's wall time. fingerprint: identifies the settings the episode
+    ran under (suite, cell, policy); records merge only when it agrees.
+    """
+
+    policy: str
+    seed: int
+    outcome: str
+    cell: str = ""
+    collision_with: str | None = None
+    collision_kind: str | None = None
+    collision_time_s: float | None = None
+    steps: int = 0
+    time_s: float = 0.0
+    time_to_goal_s: float | None = None
+    path_length_m: float = 0.0
+    min_distance_m: float | None = None
+    discomfort_frequency: float = 0.0
+    group_intrusion: bool = False
+    intrusion_fraction: float = 0.0
+    plans: int = 0
+    fallbacks: int = 0
+    ret: float = 0.0
+    wall_time_s: float = 0.0
+    error: str | None = None
+    fingerprint: str = ""
+    solve_times_ms: tuple[float, ...] = field(default=(), repr=False)
+
+    def __post_init__(self) -> None:
+        if self.outcome not in OUTCOMES:
+            raise ValueError(f"unknown episode outcome {self.outcome!r}; valid: {', '.join(OUTCOMES)}")
+        if self.collision_kind is not None and self.collision_kind not in COLLISION_KINDS:
+            raise ValueError(f"unknown collision kind {self.collision_kind!r}; valid: {', '.join(COLLISION_KINDS)}")
+
+    @property
+    def key(self) -> tuple[str, str, int]:
+        """(cell, policy, seed): one episode of a benchmark."""
+        return self.cell, self.policy, self.seed
+
+    @property
+    def avoidable_collision(self) -> bool:
+        return self.outcome == "collision" and self.collision_kind in AVOIDABLE_KINDS
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["solve_times_ms"] = [round(t, 3) for t in self.solve_times_ms]
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> EpisodeRecord:
+        names = {f.name for f in fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"unknown record field(s) {sorted(unknown)}")
+        d = dict(d)
+        d["solve_times_ms"] = tuple(float(t) for t in d.get("solve_times_ms", ()))
+        return cls(**d)
+
+
+def read_records(path: str | Path) -> list[EpisodeRecord]:
+    """The records of a JSONL file, in file order. A last line without its newline (a write cut short by a
+    kill) is skipped; any other malformed line raises ValueError naming `path:line`. A missing file is empty."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    text = path.read_text()
+    lines = text.split("\n")
+    complete = lines[:-1]  # the piece after the last newline is a partial line or ""
+    out = []
+    for lineno, line in enumerate(complete, start=1):
+        if not line.strip():
+            continue
+        try:
+            out.append(EpisodeRecord.from_json(json.loads(line)))
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{path}:{lineno}: malformed episode record: {exc}") from exc
+    return out
+
+
+def merge_records(groups: Iterable[Iterable[EpisodeRecord]]) -> list[EpisodeRecord]:
+    """One record per episode key from several sources (first seen wins). Two records of the same key with
+    different fingerprints ran under different settings: ValueError."""
+    seen: dict[tuple[str, str, int], EpisodeRecord] = {}
+    for records in groups:
+        for r in records:
+            old = seen.get(r.key)
+            if old is None:
+                seen[r.key] = r
+            elif old.fingerprint != r.fingerprint:
+                raise ValueError(f"episode {r.key} was recorded under different settings "
+                                 f"(fingerprints {old.fingerprint} and {r.fingerprint}); refusing to merge")
+    return list(seen.values())
+
+
+class RecordStore:
+    """An append-only JSONL file of episode records (see the module docstring); one writing process at a time
+    (the benchmark's parent process appends as results come in)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+
+    def read(self) -> list[EpisodeRecord]:
+        return read_records(self.path)
+
+    def append(self, record: EpisodeRecord) -> None:
+        self._drop_partial_tail()
+        append_line(self.path, json.dumps(record.to_json(), allow_nan=False, separators=(",", ":")))
+
+    def _drop_partial_tail(self) -> None:
+        """Cut a partial last line (from a killed writer) so the next append starts on a fresh line."""
+        if not self.path.exists() or self.path.stat().st_size == 0:
+            return
+        with open(self.path, "rb+") as f:
+            f.seek(-1, 2)
+            if f.read(1) == b"\n":
+                return
+            f.seek(0)
+            content = f.read()
+            f.truncate(content.rfind(b"\n") + 1)

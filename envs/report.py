@@ -1,0 +1,208 @@
+"""Report files of evaluations: markdown tables, PNG plots. Everything is written atomically (`envs.atomic`).
+
+`markdown_table(result)` and `plot_result(result, scenes, path)` describe one policy's evaluation;
+`compare(results)`, `compare_png(results, path)` and `compare_json(results)` put several side by side. The
+benchmark's leaderboard has its own module (`envs.leaderboard`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from envs.atomic import write_atomic
+from envs.config import REPLAY_SCENARIO
+
+N_DRAWN = 3  # episodes drawn in the trajectories panel of the PNG
+RATE_KEYS = ("success_rate", "collision_rate", "timeout_rate", "group_intrusion_rate")
+RATE_LABELS = {"success_rate": "success", "collision_rate": "collision", "timeout_rate": "timeout",
+               "group_intrusion_rate": "group intrusion"}
+
+
+def fmt(value: Any, digits: int = 2) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, float | np.floating):
+        return f"{value:.{digits}f}"
+    return str(value)
+
+
+def _rate(result: dict[str, Any], key: str) -> str:
+    ci = result.get(f"{key}_ci95")
+    text = fmt(result[key])
+    return f"{text} [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else text
+
+
+def describe_config(result: dict[str, Any]) -> str:
+    """One line: scenario, crowd, visibility, time limit, dt, seeds."""
+    c = result.get("config") or {}
+    crowd = (f"replay of {c.get('replay_file')}" if c.get("scenario") == REPLAY_SCENARIO else
+             f"{c.get('n_pedestrians')} pedestrians, {'visible' if c.get('robot_visible') else 'invisible'} robot")
+    seeds = f"seeds {result['seed']}..{result['seed'] + result['episodes'] - 1}" if result.get("seed") is not None \
+        else f"{result['episodes']} episodes"
+    return (f"{c.get('scenario')}: {crowd} ({c.get('robot_model')}), time limit {fmt(c.get('time_limit_s'), 0)} s, "
+            f"dt {c.get('dt_s')} s, {seeds}")
+
+
+def markdown_table(result: dict[str, Any]) -> str:
+    """A markdown table of one policy's summary."""
+    rows = [
+        ("episodes", str(result["episodes"])),
+        ("success rate [95% CI]", _rate(result, "success_rate")),
+        ("collision rate [95% CI]", _rate(result, "collision_rate")),
+        ("avoidable collision rate [95% CI]", _rate(result, "avoidable_collision_rate")),
+        ("collisions: robot / pedestrian / spawn",
+         f"{result['collisions_robot']} / {result['collisions_pedestrian']} / {result['collisions_spawn']}"),
+        ("time to first collision, mean (s)", fmt(result["time_to_first_collision_s"])),
+        ("errors", str(result["errors"])),
+        ("timeout rate", fmt(result["timeout_rate"])),
+        ("group intrusion rate (all episodes)", fmt(result["group_intrusion_rate"])),
+        ("group intrusion rate (successes)", fmt(result["group_intrusion_rate_success"])),
+        ("time to goal, mean / median (s)",
+         f"{fmt(result['time_to_goal_s'])} / {fmt(result['time_to_goal_median_s'])}"),
+        ("path length (m)", fmt(result["path_length_m"])),
+        ("min distance, mean / overall (m)",
+         f"{fmt(result['min_distance_m'])} / {fmt(result['min_distance_overall_m'])}"),
+        ("discomfort frequency", fmt(result["discomfort_frequency"], 3)),
+        ("solve time p50 / p95 (ms)",
+         f"{fmt(result['solve_time_p50_ms'], 1)} / {fmt(result['solve_time_p95_ms'], 1)}"),
+        ("fallback rate", fmt(result["fallback_rate"], 3)),
+    ]
+    lines = [f"**{result['policy']}** — {describe_config(result)}", "", "| metric | value |", "|---|---|"]
+    lines += [f"| {name} | {value} |" for name, value in rows]
+    return "\n".join(lines)
+
+
+COMPARE_COLUMNS = (
+    ("success [95% CI]", lambda r: _rate(r, "success_rate")),
+    ("collision [95% CI]", lambda r: _rate(r, "collision_rate")),
+    ("avoidable coll.", lambda r: fmt(r["avoidable_collision_rate"])),
+    ("errors", lambda r: str(r["errors"])),
+    ("timeout", lambda r: fmt(r["timeout_rate"])),
+    ("intrusion", lambda r: fmt(r["group_intrusion_rate"])),
+    ("intrusion (succ.)", lambda r: fmt(r["group_intrusion_rate_success"])),
+    ("time to goal (s)", lambda r: fmt(r["time_to_goal_s"])),
+    ("path (m)", lambda r: fmt(r["path_length_m"])),
+    ("min dist (m)", lambda r: fmt(r["min_distance_m"])),
+    ("discomfort", lambda r: fmt(r["discomfort_frequency"], 3)),
+    ("solve p50/p95 (ms)", lambda r: f"{fmt(r['solve_time_p50_ms'], 1)}/{fmt(r['solve_time_p95_ms'], 1)}"),
+    ("fallback", lambda r: fmt(r["fallback_rate"], 3)),
+)
+
+
+def compare(results: list[dict[str, Any]]) -> str:
+    """One markdown table, a row per policy, the key metrics as columns (config line from the first)."""
+    if not results:
+        raise ValueError("nothing to compare")
+    header = "| policy | episodes | " + " | ".join(name for name, _ in COMPARE_COLUMNS) + " |"
+    lines = [describe_config(results[0]), "", header, "|" + "---|" * (len(COMPARE_COLUMNS) + 2)]
+    for r in results:
+        lines.append(f"| {r['policy']} | {r['episodes']} | " + " | ".join(f(r) for _, f in COMPARE_COLUMNS) + " |")
+    return "\n".join(lines)
+
+
+def pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig: Any, path: str | Path) -> None:
+    """A matplotlib figure as PNG, written atomically."""
+    write_atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
+
+
+def _rate_errors(results: list[dict[str, Any]], key: str) -> np.ndarray:
+    """(2, P) asymmetric error bars of the rate `key` from its Wilson interval (zeros where there is none)."""
+    err = np.zeros((2, len(results)))
+    for j, r in enumerate(results):
+        ci = r.get(f"{key}_ci95")
+        if ci:
+            err[:, j] = [max(0.0, r[key] - ci[0]), max(0.0, ci[1] - r[key])]
+    return err
+
+
+def _rates_panel(ax: Any, results: list[dict[str, Any]]) -> None:
+    """Grouped bars: the rates (groups) x policies (bars), with the 95% Wilson intervals."""
+    width = 0.8 / len(results)
+    x = np.arange(len(RATE_KEYS))
+    for j, r in enumerate(results):
+        vals = [r[k] or 0.0 for k in RATE_KEYS]
+        err = np.concatenate([_rate_errors([r], k) for k in RATE_KEYS], axis=1)
+        bars = ax.bar(x + (j - (len(results) - 1) / 2) * width, vals, width, yerr=err, capsize=3,
+                      label=r["policy"])
+        for b, v, top in zip(bars, vals, err[1], strict=True):
+            ax.text(b.get_x() + b.get_width() / 2, v + top + 0.02, f"{v:.2f}", ha="center", va="bottom",
+                    fontsize=7)
+    ax.set_xticks(x, [RATE_LABELS[k] for k in RATE_KEYS])
+    ax.set_ylim(0, 1.15)
+    ax.set_ylabel("fraction of episodes (95% Wilson CI)")
+    ax.grid(axis="y", alpha=0.3)
+
+
+def _trajectory_panel(ax: Any, scene: dict[str, Any]) -> None:
+    from crowdsim.recording import N_COLOURS, palette
+
+    colours = palette(N_COLOURS) / 255.0
+    for wall in scene["walls"]:
+        ax.plot(wall[:, 0], wall[:, 1], color="0.25", lw=2)
+    if scene["ped_xy"]:
+        pos = np.concatenate(scene["ped_xy"])
+        gid = np.concatenate(scene["ped_groups"]).astype(int)
+        if len(pos):
+            ax.scatter(pos[:, 0], pos[:, 1], s=2.0, c=colours[gid % N_COLOURS], alpha=0.3, lw=0)
+    xy = scene["robot_xy"]
+    ax.plot(xy[:, 0], xy[:, 1], color="k", lw=1.8)
+    ax.plot(*xy[0], "o", color="tab:green", ms=7, label="start")
+    ax.plot(*scene["goal"], "*", color="tab:red", ms=12, label="goal")
+    ax.plot(*xy[-1], "o", mfc="none", mec="k", ms=7)
+    x0, y0, x1, y1 = scene["bounds"]
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_title(f"seed {scene['seed']}: {scene['outcome']}", fontsize=9)
+    ax.tick_params(labelsize=7)
+
+
+def plot_result(result: dict[str, Any], scenes: list[dict[str, Any]], path: str | Path) -> None:
+    """PNG: the rates with their 95% intervals, and one panel per example episode (walls, robot path from start
+    to goal, the pedestrians' positions over the episode faint in their group's colour)."""
+    plt = pyplot()
+    n = len(scenes)
+    fig, axes = plt.subplots(1, 1 + n, figsize=(4.8 + 3.6 * n, 4.2), squeeze=False,
+                             gridspec_kw={"width_ratios": [1.3] + [1.0] * n})
+    _rates_panel(axes[0, 0], [result])
+    axes[0, 0].set_title(f"{result['policy']} ({result['episodes']} episodes)", fontsize=10)
+    for ax, scene in zip(axes[0, 1:], scenes, strict=True):
+        _trajectory_panel(ax, scene)
+    if n:
+        axes[0, 1].legend(loc="upper right", fontsize=7)
+    fig.suptitle(describe_config(result), fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def compare_png(results: list[dict[str, Any]], path: str | Path) -> None:
+    """PNG: grouped bars of the rates (success, collision, timeout, group intrusion) per policy, with the 95%
+    Wilson intervals."""
+    if not results:
+        raise ValueError("nothing to compare")
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.6 * len(RATE_KEYS) * max(1, len(results)) / 2), 4.2))
+    _rates_panel(ax, results)
+    ax.legend(fontsize=8)
+    ax.set_title(describe_config(results[0]), fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def compare_json(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """The combined JSON of several policies: one entry per policy, keyed by name."""
+    return {"policies": [r["policy"] for r in results], "results": {r["policy"]: r for r in results}}

@@ -1,0 +1,142 @@
+"""Statistics of episode records: Wilson intervals, the per-policy summary, and paired tests between policies.
+
+Rates are over the episodes that completed (outcome other than "error"); errors are counted apart. A paired
+comparison uses only the episodes both policies completed (same cell and seed, so the same crowd and route).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from envs.records import COLLISION_KINDS, EpisodeRecord, finite_or_none
+
+Z95 = 1.959963984540054  # two-sided 95% normal quantile
+ALPHA = 0.05
+
+
+def wilson_interval(k: int, n: int, z: float = Z95) -> list[float] | None:
+    """The Wilson score interval [lo, hi] for k successes in n trials (None when n == 0)."""
+    if n <= 0:
+        return None
+    p = k / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return [max(0.0, centre - half), min(1.0, centre + half)]
+
+
+def mcnemar_exact(b: int, c: int) -> float:
+    """Two-sided exact McNemar p-value for b and c discordant pairs (a binomial test of b against
+    Binomial(b + c, 1/2)); 1.0 when there are no discordant pairs."""
+    n = b + c
+    if n == 0:
+        return 1.0
+    k = min(b, c)
+    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
+    return min(1.0, 2.0 * tail)
+
+
+def paired_bootstrap(diff: np.ndarray, rng: np.random.Generator, n_boot: int = 10_000) -> tuple[float, list[float]]:
+    """Mean of paired differences (n,) and its 95% percentile bootstrap interval (resampling pairs)."""
+    diff = np.asarray(diff, float)
+    if diff.size == 0:
+        raise ValueError("no pairs to bootstrap")
+    idx = rng.integers(0, diff.size, (n_boot, diff.size))
+    means = diff[idx].mean(axis=1)
+    return float(diff.mean()), [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
+
+
+def _mean(values: Sequence[float]) -> float | None:
+    return float(np.mean(values)) if len(values) else None
+
+
+def _rate(out: dict[str, Any], key: str, k: int, n: int) -> None:
+    out[key] = k / n if n else None
+    out[f"{key}_ci95"] = wilson_interval(k, n)
+
+
+def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
+    """The summary of one policy's episodes (JSON-ready).
+
+    Rates (with 95% Wilson intervals) are over completed episodes; `group_intrusion_rate_success` over
+    successful ones. Collisions split by kind (`collisions_<kind>`); `avoidable_collision_rate` counts the
+    robot and pedestrian kinds, not tracks that began in contact. Time to goal and path length are over
+    successes; min distance is the mean of the per-episode minima (episodes without pedestrians left out);
+    solve-time percentiles are over every solver call (None without any); fallback rate = fallbacks / plans.
+    """
+    if not records:
+        raise ValueError("no episodes to aggregate")
+    done = [r for r in records if r.outcome != "error"]
+    n = len(done)
+    count = {o: sum(r.outcome == o for r in done) for o in ("success", "collision", "timeout")}
+    succ = [r for r in done if r.outcome == "success"]
+    coll = [r for r in done if r.outcome == "collision"]
+    out: dict[str, Any] = {"episodes": len(records), "completed": n, "errors": len(records) - n}
+    for o in ("success", "collision", "timeout"):
+        _rate(out, f"{o}_rate", count[o], n)
+    _rate(out, "avoidable_collision_rate", sum(r.avoidable_collision for r in done), n)
+    _rate(out, "group_intrusion_rate", sum(r.group_intrusion for r in done), n)
+    out["group_intrusion_rate_success"] = (sum(r.group_intrusion for r in succ) / len(succ)) if succ else None
+    out["collisions"] = len(coll)
+    for kind in COLLISION_KINDS:
+        out[f"collisions_{kind}"] = sum(r.collision_kind == kind for r in coll)
+    out["wall_collisions"] = sum(r.collision_with == "wall" for r in coll)
+    out["time_to_first_collision_s"] = _mean([r.collision_time_s for r in coll if r.collision_time_s is not None])
+    ttg = [r.time_to_goal_s for r in succ if r.time_to_goal_s is not None]
+    out["time_to_goal_s"] = _mean(ttg)
+    out["time_to_goal_median_s"] = float(np.median(ttg)) if ttg else None
+    out["path_length_m"] = _mean([r.path_length_m for r in succ])
+    mind = [r.min_distance_m for r in done if r.min_distance_m is not None]
+    out["min_distance_m"] = _mean(mind)
+    out["min_distance_overall_m"] = min(mind) if mind else None
+    out["discomfort_frequency"] = _mean([r.discomfort_frequency for r in done])
+    times = np.concatenate([np.asarray(r.solve_times_ms, float) for r in done]) if done else np.zeros(0)
+    out["solve_time_p50_ms"] = float(np.percentile(times, 50)) if times.size else None
+    out["solve_time_p95_ms"] = float(np.percentile(times, 95)) if times.size else None
+    out["solver_calls"] = int(times.size)
+    out["plans"] = int(sum(r.plans for r in done))
+    out["fallbacks"] = int(sum(r.fallbacks for r in done))
+    out["fallback_rate"] = out["fallbacks"] / out["plans"] if out["plans"] else None
+    out["mean_return"] = _mean([r.ret for r in done])
+    return out
+
+
+PAIRED_EVENTS: dict[str, Callable[[EpisodeRecord], bool]] = {
+    "success": lambda r: r.outcome == "success",
+    "collision": lambda r: r.outcome == "collision",
+    "avoidable_collision": lambda r: r.avoidable_collision,
+}
+
+
+def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], alpha: float = ALPHA,
+                      seed: int = 0) -> dict[str, Any]:
+    """Policy a against policy b on the episodes both completed (matched by cell and seed).
+
+    For each binary event (success, collision, avoidable collision): counts, the discordant pairs (a only,
+    b only), the exact McNemar p-value and `significant` (p < alpha). For the path length of episodes both
+    succeeded: the mean paired difference a - b with a 95% paired-bootstrap interval (seeded by `seed`).
+    """
+    bkeys = {(r.cell, r.seed): r for r in b if r.outcome != "error"}
+    pairs = [(r, bkeys[(r.cell, r.seed)]) for r in a if r.outcome != "error" and (r.cell, r.seed) in bkeys]
+    out: dict[str, Any] = {"policy_a": a[0].policy if a else None, "policy_b": b[0].policy if b else None,
+                           "pairs": len(pairs), "alpha": alpha, "test": "exact McNemar (two-sided)"}
+    for name, event in PAIRED_EVENTS.items():
+        only_a = sum(event(x) and not event(y) for x, y in pairs)
+        only_b = sum(event(y) and not event(x) for x, y in pairs)
+        p = mcnemar_exact(only_a, only_b)
+        out[name] = {"a": sum(event(x) for x, _ in pairs), "b": sum(event(y) for _, y in pairs),
+                     "a_only": only_a, "b_only": only_b, "p_value": p, "significant": p < alpha}
+    both = [(x.path_length_m, y.path_length_m) for x, y in pairs if x.outcome == y.outcome == "success"]
+    if both:
+        mean, ci = paired_bootstrap(np.subtract(*np.array(both).T), np.random.default_rng(seed))
+        out["path_length_m"] = {"pairs": len(both), "mean_diff": mean, "ci95": ci,
+                                "significant": not ci[0] <= 0.0 <= ci[1]}
+    return out
+
+
+__all__ = ["aggregate", "finite_or_none", "mcnemar_exact", "paired_bootstrap", "paired_comparison",
+           "wilson_interval"]

@@ -1,0 +1,140 @@
+"""Named, versioned benchmark suites: cells (an env config each) with fixed seed lists, read from package data.
+
+A suite file `envs/suites/<name>.json` holds {"name", "version", "description", "defaults", "cells": [...]}.
+A cell is either simulated ({"name", "scenario", "n_pedestrians", "robot_visible", "options"?, "episodes",
+"seed0"}) or a real-crowd replay ({"name", "replay": [files relative to the data folder], "frame_step_s",
+"episodes", "seed0"}). Episode i of a cell has seed seed0 + i; a replay cell with several files replays file
+(seed mod number of files) from a start time drawn from the seed. `defaults` are `CrowdNavConfig` fields (time
+limit, ...) applied to every cell. Every policy meets exactly the same episodes.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from crowdsim import GroupConfig
+from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+
+DEFAULT_DATA = Path("../shared/datasets/eth_ucy")
+_CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
+              "episodes", "seed0", "note"}
+_DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m"}
+
+
+def suite_names() -> list[str]:
+    """The suites shipped in `envs/suites/`."""
+    return sorted(p.name[:-5] for p in resources.files("envs.suites").iterdir() if p.name.endswith(".json"))
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One benchmark cell: how to build its env for a seed, and its seeds."""
+
+    name: str
+    spec: dict[str, Any]
+    defaults: dict[str, Any]
+    seeds: tuple[int, ...]
+
+    @property
+    def is_real(self) -> bool:
+        return "replay" in self.spec
+
+    def files(self, data: Path) -> list[Path]:
+        return [Path(data) / f for f in self.spec["replay"]]
+
+    def env_config(self, seed: int, data: Path = DEFAULT_DATA) -> CrowdNavConfig:
+        """The env config of this cell's episode `seed` (for replay: the file it replays)."""
+        kw: dict[str, Any] = dict(self.defaults)
+        if self.is_real:
+            from envs.replay import ReplayConfig
+
+            files = self.files(data)
+            limit = float(kw.get("time_limit_s", CrowdNavConfig.time_limit_s))
+            kw["replay"] = ReplayConfig(path=files[seed % len(files)], frame_step_s=float(self.spec["frame_step_s"]),
+                                        min_remaining_s=limit, name=self.name)
+            return CrowdNavConfig(scenario=REPLAY_SCENARIO, **kw)
+        n = int(self.spec["n_pedestrians"])
+        return CrowdNavConfig(scenario=self.spec["scenario"], n_pedestrians=n,
+                              robot_visible=bool(self.spec["robot_visible"]),
+                              scenario_options=tuple(sorted(self.spec.get("options", {}).items())),
+                              groups=replace(GroupConfig(), max_size=min(GroupConfig().max_size, n)), **kw)
+
+
+@dataclass(frozen=True)
+class Suite:
+    name: str
+    version: int
+    description: str
+    cells: tuple[Cell, ...]
+
+    def cell(self, name: str) -> Cell:
+        for c in self.cells:
+            if c.name == name:
+                return c
+        raise ValueError(f"unknown cell {name!r} in suite {self.name}; valid names: "
+                         + ", ".join(c.name for c in self.cells))
+
+    def select(self, names: list[str] | None) -> list[Cell]:
+        """The named cells (all when None), in suite order; unknown names raise listing the valid ones."""
+        if not names:
+            return list(self.cells)
+        wanted = [self.cell(n).name for n in names]
+        return [c for c in self.cells if c.name in wanted]
+
+    def check_data(self, cells: list[Cell], data: Path) -> None:
+        """Raise ValueError when a real cell's recording is missing under `data`."""
+        for c in cells:
+            if c.is_real:
+                for f in c.files(data):
+                    if not f.is_file():
+                        raise ValueError(f"cell {c.name}: recording {f} not found; point --data at the ETH/UCY "
+                                         "folder (with eth/, hotel/, ... inside) or choose --cells")
+
+
+def _check_cell(c: dict[str, Any], where: str) -> None:
+    unknown = set(c) - _CELL_KEYS
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {sorted(unknown)}")
+    need = {"name", "episodes", "seed0"} | ({"replay", "frame_step_s"} if "replay" in c
+                                            else {"scenario", "n_pedestrians", "robot_visible"})
+    missing = need - set(c)
+    if missing:
+        raise ValueError(f"{where}: missing key(s) {sorted(missing)}")
+    if int(c["episodes"]) < 1 or int(c["seed0"]) < 0:
+        raise ValueError(f"{where}: episodes must be >= 1 and seed0 >= 0")
+
+
+def parse_suite(data: dict[str, Any], origin: str = "suite") -> Suite:
+    """A `Suite` from its JSON data; ValueError naming the problem."""
+    try:
+        defaults = dict(data.get("defaults", {}))
+        bad = set(defaults) - _DEFAULT_KEYS
+        if bad:
+            raise ValueError(f"{origin}: unknown default(s) {sorted(bad)}; valid: {sorted(_DEFAULT_KEYS)}")
+        cells = []
+        for i, c in enumerate(data["cells"]):
+            _check_cell(c, f"{origin}: cell {i}")
+            seeds = tuple(range(int(c["seed0"]), int(c["seed0"]) + int(c["episodes"])))
+            cells.append(Cell(c["name"], dict(c), defaults, seeds))
+        names = [c.name for c in cells]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{origin}: cell names repeat")
+        suite = Suite(str(data["name"]), int(data["version"]), str(data.get("description", "")), tuple(cells))
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"{origin}: malformed suite ({exc!r})") from exc
+    for cell in suite.cells:  # every simulated cell's config must be valid
+        if not cell.is_real:
+            cell.env_config(cell.seeds[0]).sim_config()
+    return suite
+
+
+def load_suite(name: str) -> Suite:
+    """A shipped suite by name (`suite_names()`); unknown names raise listing the valid ones."""
+    if name not in suite_names():
+        raise ValueError(f"unknown suite {name!r}; valid names: {', '.join(suite_names())}")
+    text = resources.files("envs.suites").joinpath(f"{name}.json").read_text()
+    return parse_suite(json.loads(text), f"suite {name}")

@@ -1,0 +1,79 @@
+"""Collision attribution: who moved into whom, decided by speeds and the relative velocity at contact."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from envs import CrowdNavEnv
+from envs.attribution import STOPPED_MPS, collision_kind
+from envs.replay import ReplayConfig
+from tests.envs.test_env import drive_straight, place_robot, write_replay
+
+
+def _tracks(tmp_path: Path, tracks: dict[int, list[tuple[int, float, float]]]) -> ReplayConfig:
+    """A recording from explicit (frame step, x, y) knots per pedestrian (0.4 s per step)."""
+    rows = sorted((10 * t, pid, x, y) for pid, knots in tracks.items() for t, x, y in knots)
+    path = tmp_path / "tracks.txt"
+    path.write_text("\n".join(f"{f}\t{p}\t{x}\t{y}" for f, p, x, y in rows) + "\n")
+    return ReplayConfig(path=path, start_mode="fixed")
+
+
+def _stand_still(env: CrowdNavEnv, steps: int = 300) -> dict:
+    for _ in range(steps):
+        _, _, term, trunc, info = env.step(env.control_to_action(np.zeros(2)))
+        if term or trunc:
+            return info["episode_metrics"]
+    raise AssertionError("episode did not end")
+
+
+@pytest.mark.parametrize(("robot_vel", "ped_vel", "kind"), [
+    ((1.0, 0.0), (0.0, 0.0), "robot"),          # robot drives into a standing person
+    ((0.0, 0.0), (-1.0, 0.0), "pedestrian"),    # a person walks into a standing robot
+    ((0.05, 0.0), (-1.0, 0.0), "pedestrian"),   # ... one creeping slower than STOPPED_MPS counts as stopped
+    ((-0.5, 0.0), (-1.2, 0.0), "pedestrian"),   # ... or backing away, but not fast enough
+    ((0.5, 0.0), (-1.0, 0.0), "robot"),         # head-on: the robot closed the gap too
+    ((0.0, 0.8), (-1.0, 0.0), "pedestrian"),    # robot moving sideways (not towards), person walks in
+])
+def test_kind_from_speeds_and_relative_velocity(robot_vel, ped_vel, kind):
+    assert STOPPED_MPS == 0.1
+    assert collision_kind(np.zeros(2), np.array(robot_vel), np.array([0.5, 0.0]), np.array(ped_vel), False) == kind
+
+
+def test_a_new_track_is_a_spawn_whatever_the_velocities():
+    assert collision_kind(np.zeros(2), np.array([1.0, 0.0]), np.array([0.3, 0.0]), np.zeros(2), True) == "spawn"
+
+
+def test_env_robot_drives_into_a_standing_pedestrian(tmp_path):
+    env = CrowdNavEnv(scenario="replay", replay=write_replay(tmp_path, {1: (3.0, 0.0), 2: (20.0, 20.0)}))
+    env.reset(seed=0)
+    place_robot(env, (0.0, 0.0), (6.0, 0.0))
+    infos, _ = drive_straight(env)
+    m = infos[-1]["episode_metrics"]
+    assert m["collision_kind"] == "robot"
+    assert m["collision_time_s"] == pytest.approx(m["time_s"]) and m["collision_time_s"] > 1.0
+
+
+def test_env_pedestrian_walks_into_a_stopped_robot(tmp_path):
+    # pedestrian 1 walks from x = 6 towards the robot at the origin at 1 m/s (0.4 m per 0.4 s step)
+    walker = [(t, 6.0 - 0.4 * t, 0.0) for t in range(40)]
+    far = [(t, 30.0, 30.0) for t in range(40)]
+    env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: walker, 2: far}))
+    env.reset(seed=0)
+    place_robot(env, (0.0, 0.0), (-6.0, 0.0))
+    m = _stand_still(env)
+    assert m["collision"] and m["collision_kind"] == "pedestrian"
+
+
+def test_env_track_that_starts_on_the_robot_is_a_spawn(tmp_path):
+    # pedestrian 1 appears at step 20 (8 s), 0.3 m from where the robot waits
+    appear = [(t, 0.3, 0.0) for t in range(20, 40)]
+    far = [(t, 30.0, 30.0) for t in range(40)]
+    env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: appear, 2: far}))
+    env.reset(seed=0)
+    place_robot(env, (0.0, 0.0), (-6.0, 0.0))
+    m = _stand_still(env)
+    assert m["collision"] and m["collision_kind"] == "spawn"
+    assert m["collision_time_s"] == pytest.approx(20 * 0.4 - env.config.warmup_s, abs=0.11)

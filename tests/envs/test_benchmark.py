@@ -1,0 +1,165 @@
+"""Benchmark suites: fixed seeds, the same episodes for every policy, resumable records, merging, leaderboard."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from envs.benchmark import RECORDS, plan_benchmark, run_benchmark
+from envs.cli import main
+from envs.policies import PolicyConfig
+from envs.records import EpisodeRecord, RecordStore, merge_records, read_records
+from envs.suite import load_suite, parse_suite, suite_names
+
+TINY = {"name": "tiny", "version": 1, "description": "test", "defaults": {"time_limit_s": 2.0},
+        "cells": [{"name": "corridor-a", "scenario": "corridor", "n_pedestrians": 4, "robot_visible": True,
+                   "episodes": 3, "seed0": 7},
+                  {"name": "circle-b", "scenario": "circle_crossing", "n_pedestrians": 3, "robot_visible": False,
+                   "episodes": 2, "seed0": 0}]}
+POLICIES = [PolicyConfig("random"), PolicyConfig("social-force")]
+
+
+def _untimed(board):
+    """The pooled summaries without the wall-clock solve times (which differ between any two runs)."""
+    return {pool: {name: {k: v for k, v in res.items() if not k.startswith("solve_time")}
+                   for name, res in by_policy.items()} for pool, by_policy in board["pooled"].items()}
+
+
+def _strip(records):
+    return sorted((r.key, replace(r, wall_time_s=0.0, solve_times_ms=())) for r in records)
+
+
+def test_shipped_suites_parse_and_unknown_names_list_the_valid_ones():
+    assert {"crowdnav-v1", "smoke"} <= set(suite_names())
+    with pytest.raises(ValueError, match="valid names: .*crowdnav-v1"):
+        load_suite("nope")
+    with pytest.raises(ValueError, match="valid names: .*real-eth"):
+        load_suite("crowdnav-v1").select(["real-mars"])
+
+
+def test_v1_has_the_real_recordings_at_their_frame_rate_and_the_synthetic_grid():
+    suite = load_suite("crowdnav-v1")
+    real = {c.name: c for c in suite.cells if c.is_real}
+    assert set(real) == {"real-eth", "real-hotel", "real-univ", "real-zara1", "real-zara2"}
+    assert all(len(c.seeds) >= 50 for c in real.values())
+    assert real["real-eth"].spec["frame_step_s"] == pytest.approx(0.6667, abs=1e-3)  # 6 frames at 2.5 fps... x 10/6
+    assert all(c.spec["frame_step_s"] == 0.4 for n, c in real.items() if n != "real-eth")
+    synth = [c for c in suite.cells if not c.is_real]
+    keys = {(c.spec["scenario"], c.spec["robot_visible"]) for c in synth}
+    assert {s for s, _ in keys} == {"plaza", "circle_crossing", "corridor", "crossing", "bottleneck"}
+    for scenario in {s for s, _ in keys}:
+        sizes = sorted({c.spec["n_pedestrians"] for c in synth if c.spec["scenario"] == scenario})
+        assert len(sizes) == 2 and sizes[0] < sizes[1]  # a low and a high density
+        assert {v for s, v in keys if s == scenario} == {True, False}
+
+
+def test_malformed_suites_are_rejected():
+    with pytest.raises(ValueError, match="missing key"):
+        parse_suite({**TINY, "cells": [{"name": "x", "episodes": 1, "seed0": 0}]})
+    with pytest.raises(ValueError, match="unknown key"):
+        parse_suite({**TINY, "cells": [{**TINY["cells"][0], "pedestrians": 3}]})
+    with pytest.raises(ValueError, match="unknown default"):
+        parse_suite({**TINY, "defaults": {"time_limit": 3}})
+
+
+def test_every_policy_meets_the_same_episodes(tmp_path):
+    suite = parse_suite(TINY)
+    plan = plan_benchmark(suite, suite.cells, POLICIES, tmp_path)
+    by_policy = {}
+    for t in plan.tasks:
+        by_policy.setdefault(t.policy.name, []).append((t.cell, t.seed, t.env))
+    assert by_policy["random"] == by_policy["social-force"]
+    assert [s for c, s, _ in by_policy["random"] if c == "corridor-a"] == [7, 8, 9]
+
+
+@pytest.mark.slow
+def test_killed_run_resumes_without_redoing_episodes_and_matches_one_shot(tmp_path):
+    suite = parse_suite(TINY)
+    one = run_benchmark(suite, suite.cells, POLICIES, tmp_path / "one", progress=False)
+    assert one["run"]["episodes_run"] == 10
+    # a "killed" run: only the first cell finished, and a half-written line at the end of the file
+    part = tmp_path / "part"
+    run_benchmark(suite, suite.select(["corridor-a"]), POLICIES, part, progress=False)
+    with open(part / RECORDS, "a") as f:
+        f.write('{"policy": "random", "seed": 0, "outc')
+    resumed = run_benchmark(suite, suite.cells, POLICIES, part, progress=False)
+    assert resumed["run"]["episodes_run"] == 4 and resumed["run"]["episodes_resumed"] == 6
+    assert _strip(read_records(part / RECORDS)) == _strip(read_records(tmp_path / "one" / RECORDS))
+    assert _untimed(resumed) == _untimed(one)
+    again = run_benchmark(suite, suite.cells, POLICIES, part, progress=False)
+    assert again["run"]["episodes_run"] == 0
+
+
+@pytest.mark.slow
+def test_records_from_two_machines_merge_into_one_leaderboard(tmp_path):
+    suite = parse_suite(TINY)
+    run_benchmark(suite, suite.select(["corridor-a"]), POLICIES, tmp_path / "a", progress=False)
+    run_benchmark(suite, suite.select(["circle-b"]), POLICIES, tmp_path / "b", progress=False)
+    board = run_benchmark(suite, suite.cells, POLICIES, tmp_path / "c", progress=False,
+                          merge=[tmp_path / "a" / RECORDS, tmp_path / "b" / RECORDS])
+    assert board["run"]["episodes_run"] == 0  # everything came from the merged files
+    assert board["pooled"]["synthetic"]["random"]["episodes"] == 5
+    md = (tmp_path / "c" / "leaderboard.md").read_text()
+    assert "| corridor-a |" in md and "| circle-b |" in md and "McNemar" in md
+    assert (tmp_path / "c" / "leaderboard.png").read_bytes()[:4] == b"\x89PNG"
+    saved = json.loads((tmp_path / "c" / "leaderboard.json").read_text())
+    assert saved["policies"]["social-force"]["name"] == "social-force"
+    assert {c["policy_a"] for c in saved["paired"]["synthetic"]} == {"random"}
+
+
+def test_records_under_other_settings_refuse_to_merge(tmp_path):
+    a = EpisodeRecord(policy="p", seed=1, outcome="success", cell="c", fingerprint="aaa")
+    b = replace(a, fingerprint="bbb")
+    with pytest.raises(ValueError, match="different settings"):
+        merge_records([[a], [b]])
+    store = RecordStore(tmp_path / RECORDS)
+    store.append(replace(a, cell="corridor-a", policy="random", seed=7))
+    suite = parse_suite(TINY)
+    with pytest.raises(ValueError, match="other settings"):
+        plan_benchmark(suite, suite.cells, POLICIES, tmp_path, recorded=store.read())
+
+
+def test_record_store_skips_a_partial_line_and_appends_after_it(tmp_path):
+    store = RecordStore(tmp_path / RECORDS)
+    r = EpisodeRecord(policy="p", seed=1, outcome="collision", cell="c", collision_kind="spawn",
+                      solve_times_ms=(1.5, 2.25))
+    store.append(r)
+    with open(store.path, "a") as f:
+        f.write('{"policy": "p", "se')
+    assert store.read() == [r]
+    store.append(replace(r, seed=2))
+    assert [x.seed for x in store.read()] == [1, 2]
+    with open(store.path, "a") as f:
+        f.write("not json\n")
+    with pytest.raises(ValueError, match=r"records.jsonl:3"):
+        store.read()
+
+
+def test_cli_benchmark_misuse_is_one_line(tmp_path, capsys):
+    for args, needle in ((["--suite", "nope"], "valid names"),
+                         (["--suite", "smoke", "--cells", "real-mars"], "valid names"),
+                         (["--suite", "smoke", "--policy", "teleport"], "valid names"),
+                         (["--suite", "smoke", "--data", str(tmp_path / "none")], "not found")):
+        code = main(["benchmark", *args, "--out", str(tmp_path / "o"), "--no-progress"])
+        err = capsys.readouterr().err
+        assert code == 2 and needle in err and len(err.strip().splitlines()) == 1, (args, err)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_ray_backend_gives_the_same_records_as_the_process_pool(tmp_path):
+    ray = pytest.importorskip("ray")
+    suite = parse_suite(TINY)
+    cells = suite.select(["corridor-a"])
+    pols = [PolicyConfig("mpc-cv"), PolicyConfig("random")]
+    local = run_benchmark(suite, cells, pols, tmp_path / "local", workers=2, progress=False)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        remote = run_benchmark(suite, cells, pols, tmp_path / "ray", workers=2, backend="ray", progress=False)
+    finally:
+        ray.shutdown()
+    assert remote["run"]["backend"] == "ray"
+    assert _strip(read_records(tmp_path / "ray" / RECORDS)) == _strip(read_records(tmp_path / "local" / RECORDS))
+    assert _untimed(remote) == _untimed(local)

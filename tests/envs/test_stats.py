@@ -1,0 +1,116 @@
+"""`envs.stats`: Wilson intervals, the per-policy summary of typed records, and paired tests."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from envs.records import EpisodeRecord
+from envs.stats import aggregate, mcnemar_exact, paired_bootstrap, paired_comparison, wilson_interval
+
+
+def _rec(seed, outcome, ttg=None, path=10.0, mind=0.5, disc=0.0, intr=False, plans=10, fallbacks=0, times=(),
+         kind=None, policy="p", cell="c", coll_t=None):
+    if outcome == "collision" and kind is None:
+        kind = "robot"
+    return EpisodeRecord(policy=policy, seed=seed, outcome=outcome, cell=cell,
+                         collision_with="pedestrian" if outcome == "collision" else None, collision_kind=kind,
+                         collision_time_s=coll_t, steps=100, time_s=10.0, time_to_goal_s=ttg, path_length_m=path,
+                         min_distance_m=mind, discomfort_frequency=disc, group_intrusion=intr,
+                         intrusion_fraction=0.1 * intr, plans=plans, fallbacks=fallbacks, ret=1.0,
+                         solve_times_ms=tuple(float(t) for t in times))
+
+
+def test_wilson_interval_known_values():
+    lo, hi = wilson_interval(5, 10)
+    assert lo == pytest.approx(0.2366, abs=1e-4) and hi == pytest.approx(0.7634, abs=1e-4)
+    z2 = 1.959963984540054**2
+    assert wilson_interval(0, 4) == pytest.approx([0.0, z2 / (4 + z2)])
+    assert wilson_interval(4, 4) == pytest.approx([4 / (4 + z2), 1.0])
+    assert wilson_interval(0, 0) is None
+
+
+def test_aggregate_hand_made_records():
+    records = [
+        _rec(0, "success", ttg=10.0, path=12.0, mind=0.4, disc=0.1, intr=True, plans=10, fallbacks=1,
+             times=range(1, 51)),
+        _rec(1, "success", ttg=20.0, path=14.0, mind=0.2, disc=0.3, intr=False, plans=10, fallbacks=0,
+             times=range(51, 101)),
+        _rec(2, "success", ttg=60.0, path=22.0, mind=0.6, disc=0.2, intr=False, plans=10),
+        _rec(3, "collision", path=5.0, mind=-0.1, disc=0.4, intr=True, plans=5, fallbacks=3, coll_t=4.0),
+        _rec(4, "timeout", path=99.0, mind=None, disc=0.0, intr=True, plans=5),  # nobody ever in the scene
+    ]
+    r = aggregate(records)
+    assert r["episodes"] == 5 and r["completed"] == 5 and r["errors"] == 0
+    assert (r["success_rate"], r["collision_rate"], r["timeout_rate"]) == (0.6, 0.2, 0.2)
+    assert r["group_intrusion_rate"] == pytest.approx(0.6)
+    assert r["group_intrusion_rate_success"] == pytest.approx(1 / 3)
+    assert r["success_rate_ci95"] == pytest.approx(wilson_interval(3, 5))
+    assert r["collision_rate_ci95"] == pytest.approx(wilson_interval(1, 5))
+    assert r["collisions"] == 1 and r["collisions_robot"] == 1 and r["time_to_first_collision_s"] == 4.0
+    assert r["time_to_goal_s"] == pytest.approx(30.0) and r["time_to_goal_median_s"] == pytest.approx(20.0)
+    assert r["path_length_m"] == pytest.approx(16.0)
+    assert r["min_distance_m"] == pytest.approx((0.4 + 0.2 + 0.6 - 0.1) / 4)
+    assert r["min_distance_overall_m"] == pytest.approx(-0.1)
+    assert r["discomfort_frequency"] == pytest.approx(0.2)
+    assert r["solve_time_p50_ms"] == pytest.approx(50.5) and r["solve_time_p95_ms"] == pytest.approx(95.05)
+    assert r["solver_calls"] == 100
+    assert r["fallback_rate"] == pytest.approx(4 / 40)
+    json.dumps(r, allow_nan=False)  # strict JSON
+
+
+def test_collision_kinds_and_errors_are_counted_apart():
+    records = [_rec(0, "collision", kind="robot"), _rec(1, "collision", kind="pedestrian"),
+               _rec(2, "collision", kind="spawn"), _rec(3, "success", ttg=5.0),
+               EpisodeRecord(policy="p", seed=4, outcome="error", cell="c", error="RuntimeError: boom")]
+    r = aggregate(records)
+    assert r["episodes"] == 5 and r["completed"] == 4 and r["errors"] == 1
+    assert r["collision_rate"] == 0.75  # over completed episodes
+    assert r["avoidable_collision_rate"] == 0.5  # the spawn contact is not the robot's doing
+    assert (r["collisions_robot"], r["collisions_pedestrian"], r["collisions_spawn"]) == (1, 1, 1)
+
+
+def test_aggregate_without_successes_solver_or_plans():
+    r = aggregate([_rec(0, "collision", plans=0), _rec(1, "timeout", plans=0)])
+    assert r["success_rate"] == 0.0 and r["group_intrusion_rate_success"] is None
+    assert r["time_to_goal_s"] is None and r["path_length_m"] is None
+    assert r["solve_time_p50_ms"] is None and r["fallback_rate"] is None
+    with pytest.raises(ValueError, match="no episodes"):
+        aggregate([])
+    with pytest.raises(ValueError, match="outcome"):
+        _rec(0, "running")
+
+
+@pytest.mark.parametrize(("b", "c"), [(0, 0), (0, 5), (3, 9), (10, 10), (1, 12), (25, 7)])
+def test_mcnemar_exact_matches_a_binomial_test(b, c):
+    expected = 1.0 if b + c == 0 else sps.binomtest(b, b + c, 0.5).pvalue
+    assert mcnemar_exact(b, c) == pytest.approx(expected, rel=1e-9)
+
+
+def test_paired_comparison_uses_the_same_episodes_and_calls_significance_by_the_test():
+    # a collides in 12 of 40 episodes, b in 2 of them, on the same seeds; b also has an extra seed (unpaired)
+    a = [_rec(s, "collision" if s < 12 else "success", ttg=5.0, path=10.0, policy="a") for s in range(40)]
+    b = [_rec(s, "collision" if s < 2 else "success", ttg=5.0, path=11.0, policy="b") for s in range(41)]
+    b.append(EpisodeRecord(policy="b", seed=99, outcome="error", cell="c"))
+    c = paired_comparison(a, b)
+    assert c["pairs"] == 40
+    assert (c["collision"]["a_only"], c["collision"]["b_only"]) == (10, 0)
+    assert c["collision"]["p_value"] == pytest.approx(2 * 0.5**10) and c["collision"]["significant"]
+    assert c["path_length_m"]["mean_diff"] == pytest.approx(-1.0) and c["path_length_m"]["significant"]
+    # a small difference is not called significant
+    d = paired_comparison(a[:14], [_rec(s, "collision" if s < 10 else "success", ttg=5.0, policy="b")
+                                   for s in range(14)])
+    assert not d["collision"]["significant"]
+
+
+def test_paired_bootstrap_covers_the_mean():
+    rng = np.random.default_rng(0)
+    diff = rng.normal(0.3, 1.0, 200)
+    mean, (lo, hi) = paired_bootstrap(diff, np.random.default_rng(1))
+    assert lo < mean < hi and math.isclose(mean, diff.mean())
+    half = 1.96 * diff.std(ddof=1) / math.sqrt(diff.size)
+    assert hi - lo == pytest.approx(2 * half, rel=0.15)
