@@ -33,9 +33,9 @@ def _strip(records):
 
 def test_shipped_suites_parse_and_unknown_names_list_the_valid_ones():
     assert {"crowdnav-v1", "smoke"} <= set(suite_names())
-    with pytest.raises(ValueError, match="valid names: .*crowdnav-v1"):
+    with pytest.raises(ValueError, match=r"valid names: .*crowdnav-v1"):
         load_suite("nope")
-    with pytest.raises(ValueError, match="valid names: .*real-eth"):
+    with pytest.raises(ValueError, match=r"valid names: .*real-eth"):
         load_suite("crowdnav-v1").select(["real-mars"])
 
 
