@@ -5,8 +5,9 @@ Three kinds (`envs.records.COLLISION_KINDS`), decided from the step on which con
     spawn       the pedestrian was not in the scene at the step's start: its (replayed) track began within
                 contact distance of the robot, which no planner could avoid;
     pedestrian  the pedestrian walked into a stopped or retreating robot: the robot's speed was under
-                `STOPPED_MPS`, or its velocity did not close the gap (component towards the pedestrian <= 0),
-                while the pedestrian's velocity did (component towards the robot > 0);
+                `STOPPED_MPS` (whatever the pedestrian did: a stopped robot moved into nobody), or the
+                robot's velocity did not close the gap (component towards the pedestrian <= 0) while the
+                pedestrian's did (component towards the robot > 0);
     robot       every other contact: the robot moved into the pedestrian (walls: always "robot").
 
 Velocities are those of the step (robot: its displacement / dt; pedestrian: the crowd's velocity), directions
@@ -32,5 +33,6 @@ def collision_kind(robot_pos: np.ndarray, robot_vel: np.ndarray, ped_pos: np.nda
     n = gap / dist
     robot_closing = float(np.dot(robot_vel, n))
     ped_closing = float(-np.dot(ped_vel, n))
-    robot_passive = float(np.hypot(*robot_vel)) < STOPPED_MPS or robot_closing <= 0.0
-    return "pedestrian" if robot_passive and ped_closing > 0.0 else "robot"
+    if float(np.hypot(*robot_vel)) < STOPPED_MPS:
+        return "pedestrian"
+    return "pedestrian" if robot_closing <= 0.0 and ped_closing > 0.0 else "robot"

@@ -28,9 +28,14 @@ import numpy as np
 PLUGIN_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 SB3_PREFIX = "sb3:"
 SB3_ALGOS = ("PPO", "A2C", "SAC", "TD3", "DDPG")
-_SAFE_REPLACEMENTS = ("observation_space", "action_space", "lr_schedule", "learning_rate", "clip_range",
-                      "clip_range_vf", "exploration_schedule", "_last_obs", "_last_episode_starts",
-                      "_last_original_obs", "_episode_storage")
+# Pickled entries of an SB3 file and what replaces them: the env's spaces, SB3's default policy for a Dict
+# observation and its default buffers (None), constant schedules (only used when training) and no training state.
+_SAFE_REPLACEMENTS: dict[str, Any] = {
+    "policy_class": None, "rollout_buffer_class": None, "replay_buffer_class": None,
+    "lr_schedule": lambda _: 0.0, "learning_rate": 0.0, "clip_range": lambda _: 0.0, "clip_range_vf": None,
+    "exploration_schedule": lambda _: 0.0, "_last_obs": None, "_last_episode_starts": None,
+    "_last_original_obs": None, "_episode_storage": None,
+}
 
 
 def is_plugin(spec: str) -> bool:
@@ -79,17 +84,19 @@ class SB3Policy:
         except (zipfile.BadZipFile, KeyError, json.JSONDecodeError) as exc:
             raise ValueError(f"{path}: not a stable-baselines3 model file ({exc})") from exc
         pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
-        unsafe = [k for k in pickled if k not in _SAFE_REPLACEMENTS]
+        unsafe = [k for k in pickled if k not in _SAFE_REPLACEMENTS and k not in ("observation_space", "action_space")]
         if unsafe:
             raise ValueError(f"{path}: settings {unsafe} would need unpickling Python objects; refusing to load")
         import stable_baselines3
         import torch
 
         torch.set_num_threads(threads)
-        custom = {k: (lambda _: 0.0) for k in pickled}
-        custom.update(observation_space=env.observation_space, action_space=env.action_space)
+        cls = getattr(stable_baselines3, algo)
+        custom = {k: _SAFE_REPLACEMENTS[k] for k in pickled if k in _SAFE_REPLACEMENTS}
+        custom.update(observation_space=env.observation_space, action_space=env.action_space,
+                      policy_class=cls.policy_aliases["MultiInputPolicy"])
         try:
-            self.model = getattr(stable_baselines3, algo).load(path, custom_objects=custom, device="cpu")
+            self.model = cls.load(path, custom_objects=custom, device="cpu")
         except (ValueError, RuntimeError, KeyError) as exc:
             raise ValueError(f"{path}: cannot load as {algo} for this env ({exc})") from exc
         self.name, self.deterministic = f"sb3:{path.stem}", deterministic

@@ -33,6 +33,8 @@ def _stand_still(env: CrowdNavEnv, steps: int = 300) -> dict:
     ((1.0, 0.0), (0.0, 0.0), "robot"),          # robot drives into a standing person
     ((0.0, 0.0), (-1.0, 0.0), "pedestrian"),    # a person walks into a standing robot
     ((0.05, 0.0), (-1.0, 0.0), "pedestrian"),   # ... one creeping slower than STOPPED_MPS counts as stopped
+    ((0.0, 0.0), (0.3, 0.5), "pedestrian"),     # a stopped robot moved into nobody, whatever the contact did
+    ((-0.5, 0.0), (0.2, 0.0), "robot"),         # backing away from someone also moving away: the robot's doing
     ((-0.5, 0.0), (-1.2, 0.0), "pedestrian"),   # ... or backing away, but not fast enough
     ((0.5, 0.0), (-1.0, 0.0), "robot"),         # head-on: the robot closed the gap too
     ((0.0, 0.8), (-1.0, 0.0), "pedestrian"),    # robot moving sideways (not towards), person walks in

@@ -1,0 +1,166 @@
+"""Plug-ins: the README's policy example, a predictor plug-in, SB3 agents, and plug-ins that fail."""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from envs import CrowdNavConfig, CrowdNavEnv
+from envs.cli import main
+from envs.evaluate import evaluate
+from envs.policies import PolicyConfig, make_policy
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+SMALL = CrowdNavConfig(scenario="corridor", n_pedestrians=6, time_limit_s=4.0)
+TINY = ["--episodes", "2", "--workers", "1", "--record", "0", "--no-progress", "--pedestrians", "4",
+        "--time-limit", "4", "--scenario", "corridor"]
+
+PREDICTOR_PLUGIN = '''
+import numpy as np
+from types import SimpleNamespace
+
+
+class Straight:
+    """Constant velocity from the last two rows; pairs of neighbours (ids 2k, 2k+1) are one group."""
+
+    def predict(self, history, n_samples, rng):
+        v = history[-1] - history[-2]
+        steps = np.arange(1, 13)[:, None, None]
+        mean = history[-1][None] + steps * v[None]
+        return SimpleNamespace(samples=np.repeat(mean[None], n_samples, axis=0),
+                               group_id=np.arange(history.shape[1]) // 2)
+
+
+def make():
+    return Straight()
+
+
+class Slow(Straight):
+    step_s = 0.8
+
+
+def make_slow():
+    return Slow()
+'''
+
+FAILING_POLICY = '''
+import numpy as np
+
+
+class Flaky:
+    name = "flaky"
+
+    def reset(self, env, seed=None):
+        self.seed = seed
+
+    def act(self, obs, env):
+        if self.seed == 1 and env.steps == 5:
+            raise RuntimeError("flaky policy gave up")
+        return np.zeros(2, np.float32)
+
+
+def make(config, env):
+    return Flaky()
+
+
+def broken(config, env):
+    raise ValueError("cannot build")
+'''
+
+
+@pytest.fixture
+def plugin_dir(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield tmp_path
+    for name in ("my_policies", "pred_plugin", "flaky_plugin"):
+        sys.modules.pop(name, None)
+
+
+def _readme_plugin() -> str:
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), re.S)
+    found = [b for b in blocks if b.startswith("# my_policies.py")]
+    assert len(found) == 1, "the README's policy plug-in example is missing"
+    return found[0]
+
+
+def test_readme_policy_example_runs_as_written(plugin_dir, capsys):
+    source = _readme_plugin()
+    assert len(source.splitlines()) <= 30
+    (plugin_dir / "my_policies.py").write_text(source)
+    out = plugin_dir / "out"
+    assert main(["evaluate", "--policy", "my_policies:make_cautious", *TINY, "--out", str(out)]) == 0
+    saved = json.loads((out / "my_policies_make_cautious.json").read_text())
+    assert saved["policy"] == "my_policies:make_cautious" and saved["completed"] == 2 and saved["errors"] == 0
+    assert any(e["path_length_m"] > 0.5 for e in saved["episode_list"])  # its actions drive the robot
+
+
+def test_predictor_plugin_feeds_the_mpc(plugin_dir):
+    (plugin_dir / "pred_plugin.py").write_text(PREDICTOR_PLUGIN)
+    env = CrowdNavEnv(SMALL)
+    policy = make_policy(PolicyConfig("mpc-gpgraph", predictor="pred_plugin:make", n_samples=3), env)
+    obs, _ = env.reset(seed=0)
+    policy.reset(env, 0)
+    policy.act(obs, env)
+    frame = env.frame()
+    n = frame.n_peds
+    assert frame.predictions.shape == (3, 12, n, 2)
+    assert np.array_equal(frame.predicted_group_id, np.arange(n) // 2)
+    # a predictor on another time step is refused before it can mislead the planner
+    slow = make_policy(PolicyConfig("mpc-gpgraph", predictor="pred_plugin:make_slow"), env)
+    with pytest.raises(ValueError, match=r"step_s=0\.8"):
+        slow.reset(env, 0)
+
+
+def test_a_policy_that_raises_is_recorded_as_an_error_and_the_run_goes_on(plugin_dir):
+    (plugin_dir / "flaky_plugin.py").write_text(FAILING_POLICY)
+    out = plugin_dir / "out"
+    r = evaluate(PolicyConfig("flaky_plugin:make"), SMALL, episodes=3, seed=0, record=0, out_dir=out, progress=False)
+    outcomes = [e["outcome"] for e in r["episode_list"]]
+    assert outcomes[1] == "error" and outcomes[0] != "error" and outcomes[2] != "error"
+    assert r["errors"] == 1 and r["completed"] == 2
+    assert "flaky policy gave up" in r["episode_list"][1]["error"]
+    trace = list((out / "errors").glob("*seed1.txt"))
+    assert len(trace) == 1 and "Traceback" in trace[0].read_text()
+
+
+def test_a_plugin_that_cannot_be_built_fails_before_any_episode(plugin_dir, capsys):
+    (plugin_dir / "flaky_plugin.py").write_text(FAILING_POLICY)
+    out = plugin_dir / "never"
+    assert main(["evaluate", "--policy", "flaky_plugin:broken", *TINY, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "cannot build" in err and len(err.strip().splitlines()) == 1 and not out.exists()
+    assert main(["evaluate", "--policy", "flaky_plugin:missing", *TINY, "--out", str(out)]) == 2
+    assert "no callable 'missing'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_sb3_agent_loads_safely_and_acts_like_the_saved_model(tmp_path):
+    from stable_baselines3 import PPO
+
+    env = CrowdNavEnv(SMALL)
+    model = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, seed=0, device="cpu",
+                policy_kwargs={"net_arch": [16]})
+    path = tmp_path / "agent.zip"
+    model.save(path)
+    policy = make_policy(PolicyConfig(f"sb3:{path}"), env)
+    obs, _ = env.reset(seed=3)
+    for _ in range(5):
+        expected, _ = model.predict(obs, deterministic=True)
+        action = policy.act(obs, env)
+        assert np.allclose(action, expected, atol=1e-6)
+        obs, *_ = env.step(action)
+    import torch
+
+    custom = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, device="cpu",
+                 policy_kwargs={"activation_fn": torch.nn.Tanh})
+    custom.save(tmp_path / "custom.zip")
+    with pytest.raises(ValueError, match="unpickling"):
+        make_policy(PolicyConfig(f"sb3:{tmp_path / 'custom.zip'}"), env)
+    (tmp_path / "junk.zip").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not a stable-baselines3 model"):
+        make_policy(PolicyConfig(f"sb3:{tmp_path / 'junk.zip'}"), env)
