@@ -61,3 +61,40 @@ def test_same_seed_same_episode_for_the_mpc():
     a = run_episode(env.config, "mpc-cv", 4, env=env, policy=make_policy("mpc-cv", env))
     b = run_episode(env.config, "mpc-cv", 4, env=CrowdNavEnv(env.config))
     np.testing.assert_array_equal(a.robot_xy, b.robot_xy)
+
+
+def _awkward_scene(tmp_path):
+    """Nobody for the first 4 s, then one pedestrian seen for a single annotation frame, one walking past the
+    route and leaving mid-plan, and one crossing late (0.4 s frames, ETH/UCY format)."""
+    from envs.replay import ReplayConfig
+
+    rows = [(10 * 10, 1, 2.0, 0.6)]  # seen once, at t = 4 s, near the robot's line
+    rows += [(10 * t, 2, 1.0 + 0.3 * (t - 12), 1.5) for t in range(12, 22)]  # leaves after 8.4 s
+    rows += [(10 * t, 3, 4.0, -4.0 + 0.4 * (t - 15)) for t in range(15, 45)]  # crosses the route later
+    rows += [(0, 4, 30.0, 30.0), (10 * 60, 5, -30.0, -30.0)]  # single far-away frames: the recording's extent
+    path = tmp_path / "awkward.txt"
+    path.write_text("\n".join(f"{f}\t{p}\t{x:.3f}\t{y:.3f}" for f, p, x, y in sorted(rows)) + "\n")
+    return ReplayConfig(path=path, start_mode="fixed")
+
+
+@pytest.mark.parametrize("name", ["mpc-gpgraph", "mpc-cv", "mpc-none", "social-force", "random"])
+def test_every_policy_handles_an_empty_scene_a_one_tick_pedestrian_and_one_leaving_mid_plan(name, tmp_path):
+    cfg = CrowdNavConfig(scenario="replay", replay=_awkward_scene(tmp_path), time_limit_s=14.0, warmup_s=0.0)
+    env = CrowdNavEnv(cfg)
+    policy = make_policy(name, env)
+    obs, _ = env.reset(seed=0)
+    policy.reset(env, 0)
+    env.robot_state[:3] = [0.0, 0.0, 0.0]
+    env.goal = np.array([8.0, 0.0])
+    seen, done, info = set(), False, {}
+    while not done:  # never raises; every step's action is valid
+        action = policy.act(obs, env)
+        assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
+        seen.add(len(env.pedestrians().pos))
+        obs, _, term, trunc, info = env.step(action)
+        done = term or trunc
+    assert 0 in seen and 1 in seen  # the empty scene and the lone pedestrians really happened
+    assert info["episode_metrics"]["outcome"] in ("success", "collision", "timeout")
+    stats = getattr(policy, "stats", None)
+    if name.startswith("mpc"):
+        assert stats.counts["calls"] == info["episode_metrics"]["steps"]
