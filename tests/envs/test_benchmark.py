@@ -9,7 +9,7 @@ import pytest
 
 from envs.benchmark import RECORDS, plan_benchmark, run_benchmark
 from envs.cli import main
-from envs.policies import PolicyConfig
+from envs.policies import ENV_MPC, PolicyConfig
 from envs.records import EpisodeRecord, RecordStore, merge_records, read_records
 from envs.suite import load_suite, parse_suite, suite_names
 
@@ -153,7 +153,8 @@ def test_ray_backend_gives_the_same_records_as_the_process_pool(tmp_path):
     ray = pytest.importorskip("ray")
     suite = parse_suite(TINY)
     cells = suite.select(["corridor-a"])
-    pols = [PolicyConfig("mpc-cv"), PolicyConfig("random")]
+    # no wall-clock budget: a solve cut short by machine load would fall back and change the episode
+    pols = [PolicyConfig("mpc-cv", mpc=replace(ENV_MPC, time_budget_s=30.0)), PolicyConfig("random")]
     local = run_benchmark(suite, cells, pols, tmp_path / "local", workers=2, progress=False)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
