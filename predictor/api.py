@@ -18,6 +18,7 @@ from predictor.model import GPGraph
 from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
 
 OBS_LEN, PRED_LEN = 8, 12
+STEP_S = 0.4  # seconds between history rows and between predicted steps (the ETH/UCY protocol)
 CONSTANT_VELOCITY_NAMES = ("constant-velocity", "cv")
 
 
@@ -65,6 +66,8 @@ def _check_inputs(history: np.ndarray, n_samples: int,
 class GPGraphPredictor:
     """Wraps a trained ``GPGraph``; latents follow ``spec`` (default: the model's sample level)."""
 
+    step_s, obs_len, pred_len = STEP_S, OBS_LEN, PRED_LEN  # the timing it was trained on (callers check it)
+
     def __init__(self, model: GPGraph, spec: LatentSpec | None = None) -> None:
         self.model = model.eval()
         self.spec = spec or LatentSpec("normal", model.config.sample_level, per_step=True)
@@ -109,6 +112,8 @@ class ConstantVelocityPredictor:
 
     Every pedestrian is its own group.
     """
+
+    step_s, obs_len, pred_len = STEP_S, OBS_LEN, PRED_LEN
 
     def __init__(self, config: ConstantVelocityConfig | None = None) -> None:
         self.config = config or ConstantVelocityConfig()
