@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo demo-crowd test test-fast lint bench synthetic-predictor clean
+.PHONY: setup demo demo-crowd test test-fast lint bench benchmark synthetic-predictor clean
 
 setup: $(STAMP)
 
@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[dev,bench,viz,rl]"
+	$(PY) -m pip install --quiet -e ".[dev,bench,viz,rl,ray]"
 	touch $(STAMP)
 
 # Main job on built-in defaults: a grouped crowd, GP-Graph prediction and the MPC robot end to end; writes the
@@ -39,6 +39,12 @@ bench: setup
 	$(PY) bench/bench_crowdsim.py
 	$(PY) bench/bench_planner.py --quick
 	$(PY) bench/bench_env.py --quick
+
+# The planner benchmark behind RESULTS.md ("Planner benchmark"): suite crowdnav-v1 (5 real ETH/UCY replays x 50
+# episodes, 20 synthetic cells x 10), mpc-gpgraph, mpc-cv, mpc-none and social-force, 2 workers. Resumable: rerun
+# to continue a killed run. Prints the leaderboard; files in out/bench-v1. Not run in CI.
+benchmark: setup
+	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v1 --data ../shared/datasets/eth_ucy
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
 # (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~40 min on one CPU core. Not run in CI. See RESULTS.md.

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.config import GroupConfig, SimConfig
-from crowdsim.generate import SPLITS, RunSpec, generate, make_dataset
+from crowdsim.generate import BACKENDS, SPLITS, RunSpec, generate, make_dataset
 from crowdsim.scenarios import SCENARIOS
 
 
@@ -59,6 +59,14 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--scenarios", default="corridor,crossing,plaza,circle_crossing")
     d.add_argument("--seeds-per-scenario", type=int, default=6)
     d.add_argument("--out", type=Path, required=True)
+    d.add_argument("--backend", choices=BACKENDS, default="local",
+                   help="local: this machine's processes (default); ray: one Ray task per recording "
+                        "(needs the 'ray' extra). The files are identical either way")
+    d.add_argument("--workers", type=int, default=None,
+                   help="local: processes (default 1: serial); ray: CPUs of the local Ray instance "
+                        "(default: all cores)")
+    d.add_argument("--address", default=None, metavar="auto|HOST:PORT",
+                   help="with --backend ray: connect to a running Ray cluster instead of starting one")
     _common(d, 300.0)
     m = sub.add_parser("demo", help="generate and record a grouped crowd on built-in defaults")
     m.add_argument("--out", type=Path, default=Path("out/demo"))
@@ -73,6 +81,30 @@ def _summary(paths: dict[str, Path]) -> str:
             f"{len(groups)} groups of 2+ -> {paths['trajectories'].parent}")
 
 
+def _error(message: str) -> int:
+    """One line on stderr, exit status 2 (a usage error)."""
+    print(f"crowdsim: error: {message}", file=sys.stderr)
+    return 2
+
+
+def _dataset_usage_error(args: argparse.Namespace) -> str | None:
+    """What is wrong with the backend options of `crowdsim dataset`, if anything (checked before any work)."""
+    if args.address is not None and args.backend != "ray":
+        return "--address needs --backend ray"
+    if args.workers is not None and args.workers < 1:
+        return f"--workers must be >= 1, got {args.workers}"
+    if args.workers is not None and args.address is not None:
+        return "--workers sizes a local Ray instance; with --address the cluster's CPUs decide"
+    if args.backend == "ray":
+        from crowdsim.distributed import RayUnavailableError, import_ray
+
+        try:
+            import_ray()
+        except RayUnavailableError as exc:
+            return str(exc)
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "scenarios":
@@ -84,12 +116,20 @@ def main(argv: list[str] | None = None) -> int:
         print(_summary(paths))
         return 0
     if args.command == "dataset":
+        problem = _dataset_usage_error(args)
+        if problem is not None:
+            return _error(problem)
         scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
         base = _config(args, scenarios[0])
         for s in scenarios:
             _config(args, s)
-        out = make_dataset(args.out, scenarios, args.seeds_per_scenario, base,
-                           RunSpec(args.duration, args.warmup, args.seed))
+        try:
+            out = make_dataset(args.out, scenarios, args.seeds_per_scenario, base,
+                               RunSpec(args.duration, args.warmup, args.seed), backend=args.backend,
+                               workers=args.workers, address=args.address)
+        except ConnectionError as exc:  # ray.init could not reach --address
+            print(f"crowdsim: error: cannot connect to Ray at {args.address}: {exc}", file=sys.stderr)
+            return 1
         for split in SPLITS:
             print(f"{split}: {len(out[split])} recordings in {args.out / split}")
         return 0

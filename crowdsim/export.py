@@ -88,25 +88,40 @@ def groups_text(table: np.ndarray) -> str:
     return "\n".join(lines) + ("\n" if lines else "")
 
 
-def write_recording(folder: Path, name: str, log: TrajectoryLog, metadata: dict[str, Any]) -> dict[str, Path]:
-    """Write X.txt, X.groups.txt, X.labels.tsv and X.json into folder; returns their paths."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+RecordingFiles = dict[str, tuple[str, str]]  # kind ("trajectories", ...) -> (file name, text)
+
+
+def recording_files(name: str, log: TrajectoryLog, metadata: dict[str, Any]) -> RecordingFiles:
+    """The four files of recording `name` as texts, in memory (what `write_recording` writes): kind ->
+    (file name, text), kinds "trajectories", "groups", "labels", "metadata" in that order."""
     table = log.table()
-    paths = {
-        "trajectories": folder / f"{name}.txt",
-        "groups": folder / f"{name}.groups.txt",
-        "labels": folder / f"{name}.labels.tsv",
-        "metadata": folder / f"{name}.json",
-    }
-    _atomic_write(paths["trajectories"], trajectories_text(table))
-    _atomic_write(paths["groups"], groups_text(table))
-    _atomic_write(paths["labels"], labels_text(table))
+    names = {"trajectories": f"{name}.txt", "groups": f"{name}.groups.txt", "labels": f"{name}.labels.tsv",
+             "metadata": f"{name}.json"}
     meta = dict(metadata)
     meta.update(rows=len(table), pedestrians=len(np.unique(table[:, 1])) if len(table) else 0,
-                frame_stride=FRAME_STRIDE, files={k: p.name for k, p in paths.items()})
-    _atomic_write(paths["metadata"], json.dumps(meta, indent=2, sort_keys=True) + "\n")
+                frame_stride=FRAME_STRIDE, files=names)
+    return {
+        "trajectories": (names["trajectories"], trajectories_text(table)),
+        "groups": (names["groups"], groups_text(table)),
+        "labels": (names["labels"], labels_text(table)),
+        "metadata": (names["metadata"], json.dumps(meta, indent=2, sort_keys=True) + "\n"),
+    }
+
+
+def write_files(folder: Path, files: RecordingFiles) -> dict[str, Path]:
+    """Write each (file name, text) of `files` atomically into folder (created if needed); kind -> path."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for kind, (file_name, text) in files.items():
+        paths[kind] = folder / file_name
+        _atomic_write(paths[kind], text)
     return paths
+
+
+def write_recording(folder: Path, name: str, log: TrajectoryLog, metadata: dict[str, Any]) -> dict[str, Path]:
+    """Write X.txt, X.groups.txt, X.labels.tsv and X.json into folder; returns their paths."""
+    return write_files(folder, recording_files(name, log, metadata))
 
 
 def read_groups_file(path: Path) -> list[list[int]]:

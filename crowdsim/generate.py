@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import multiprocessing
+import sys
+from collections.abc import Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import closing
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -11,10 +16,11 @@ from tqdm import tqdm
 
 from crowdsim import __version__
 from crowdsim.config import SimConfig
-from crowdsim.export import TrajectoryLog, write_recording
+from crowdsim.export import RecordingFiles, TrajectoryLog, recording_files, write_files, write_recording
 from crowdsim.sim import CrowdSimulator
 
 SPLITS = ("train", "val", "test")
+BACKENDS = ("local", "ray")  # how make_dataset runs its recordings: this machine's processes, or Ray tasks
 
 
 @dataclass(frozen=True)
@@ -75,10 +81,15 @@ def metadata(config: SimConfig, spec: RunSpec, sim: CrowdSimulator) -> dict[str,
     }
 
 
+def default_name(config: SimConfig, spec: RunSpec) -> str:
+    """File stem of a recording: `<scenario>_n<pedestrians>_s<seed>`."""
+    return f"{config.scenario}_n{config.n_pedestrians}_s{spec.seed}"
+
+
 def generate(config: SimConfig, spec: RunSpec, out_dir: Path, name: str | None = None,
              rrd: bool = False, progress: bool = False) -> dict[str, Path]:
     """Simulate and write one recording (and optionally `<name>.rrd`) into out_dir."""
-    name = name or f"{config.scenario}_n{config.n_pedestrians}_s{spec.seed}"
+    name = name or default_name(config, spec)
     out_dir = Path(out_dir)
     rrd_path = out_dir / f"{name}.rrd" if rrd else None
     log, sim = simulate(config, spec, rrd_path, progress)
@@ -86,6 +97,23 @@ def generate(config: SimConfig, spec: RunSpec, out_dir: Path, name: str | None =
     if rrd_path is not None:
         paths["rrd"] = rrd_path
     return paths
+
+
+@dataclass(frozen=True)
+class RecordingJob:
+    """One recording of a dataset: what to simulate, and where its files go (split folder, file stem)."""
+
+    config: SimConfig
+    spec: RunSpec
+    split: str
+    name: str
+
+
+def render_job(job: RecordingJob) -> RecordingFiles:
+    """Simulate one dataset recording and return its files as texts (written by the caller): the unit of
+    work of every backend, so that they all produce the same bytes."""
+    log, sim = simulate(job.config, job.spec)
+    return recording_files(job.name, log, metadata(job.config, job.spec, sim))
 
 
 def split_of(index: int, n: int) -> str:
@@ -98,18 +126,87 @@ def split_of(index: int, n: int) -> str:
     return ("train", "train", "train", "train", "val", "test")[index % 6] if n > 6 else "train"
 
 
+def dataset_jobs(scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
+                 spec: RunSpec) -> list[RecordingJob]:
+    """The recordings of a dataset, scenario-major: seed spec.seed + k of each scenario goes to
+    `split_of(k, seeds_per_scenario)`."""
+    jobs = []
+    for scen in scenarios:
+        config = replace(base, scenario=scen)
+        for k in range(seeds_per_scenario):
+            run = replace(spec, seed=spec.seed + k)
+            jobs.append(RecordingJob(config, run, split_of(k, seeds_per_scenario), default_name(config, run)))
+    return jobs
+
+
+def _mp_context() -> multiprocessing.context.BaseContext:
+    """forkserver where available (no fork of a threaded parent), with the simulator imported once."""
+    if sys.platform.startswith("linux") and "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["crowdsim.generate"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+def run_local(jobs: list[RecordingJob], workers: int = 1) -> Iterator[tuple[int, RecordingFiles]]:
+    """Render `jobs`, yielding (index in jobs, files) as they finish: in this process if workers <= 1,
+    else in a pool of `workers` processes."""
+    if workers <= 1 or len(jobs) <= 1:
+        for i, job in enumerate(jobs):
+            yield i, render_job(job)
+        return
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=_mp_context())
+    try:
+        futures = {pool.submit(render_job, job): i for i, job in enumerate(jobs)}
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                yield futures[fut], fut.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
-                 spec: RunSpec, progress: bool = True) -> dict[str, list[Path]]:
+                 spec: RunSpec, progress: bool = True, backend: str = "local", workers: int | None = None,
+                 address: str | None = None) -> dict[str, list[Path]]:
     """Generate `seeds_per_scenario` recordings per scenario into out_dir/{train,val,test}/.
 
     Seeds are spec.seed + k; recording k of a scenario goes to `split_of(k, seeds_per_scenario)`.
+    Every recording is simulated independently (its own seed), and this process writes each one's files
+    atomically as it arrives, so the files are byte-identical whatever the backend and worker count.
+
+    Args:
+        backend: "local" (this machine) or "ray" (one Ray task per recording; needs the `ray` extra).
+        workers: local: processes (None or 1: in this process, serially; more starts a forkserver pool, so
+            a calling script needs the `if __name__ == "__main__":` guard). Ray: CPUs of the local Ray
+            instance it starts (None: all cores); must be None with `address`.
+        address: Ray only: None starts a local Ray instance; "auto" or "HOST:PORT" connects to a running
+            cluster, whose nodes need crowdsim installed. An already initialised Ray is used as it is.
+
+    Returns the trajectory file paths of each split, in job order (scenario-major, then seed).
     """
-    out = {s: [] for s in SPLITS}
-    jobs = [(scen, k) for scen in scenarios for k in range(seeds_per_scenario)]
-    for scen, k in tqdm(jobs, desc="dataset", unit="recording", disable=not progress):
-        config = replace(base, scenario=scen)
-        run = replace(spec, seed=spec.seed + k)
-        split = split_of(k, seeds_per_scenario)
-        paths = generate(config, run, Path(out_dir) / split, progress=False)
-        out[split].append(paths["trajectories"])
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
+    if address is not None and backend != "ray":
+        raise ValueError("address needs backend='ray'")
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if workers is not None and address is not None:
+        raise ValueError("workers sizes a local Ray instance; with an address the cluster's CPUs decide")
+    jobs = dataset_jobs(scenarios, seeds_per_scenario, base, spec)
+    if backend == "ray":
+        from crowdsim.distributed import run_on_ray
+
+        results = run_on_ray(render_job, jobs, address=address, num_cpus=workers)
+    else:
+        results = run_local(jobs, workers or 1)
+    paths: dict[int, Path] = {}
+    with closing(results), tqdm(total=len(jobs), desc="dataset", unit="recording", disable=not progress) as bar:
+        for i, files in results:
+            paths[i] = write_files(Path(out_dir) / jobs[i].split, files)["trajectories"]
+            bar.update(1)
+    out: dict[str, list[Path]] = {s: [] for s in SPLITS}
+    for i, job in enumerate(jobs):
+        out[job.split].append(paths[i])
     return out

@@ -88,9 +88,10 @@ class SB3Policy:
         if unsafe:
             raise ValueError(f"{path}: settings {unsafe} would need unpickling Python objects; refusing to load")
         import stable_baselines3
-        import torch
 
-        torch.set_num_threads(threads)
+        from predictor import set_threads  # torch stays behind the predictor package
+
+        set_threads(threads)
         cls = getattr(stable_baselines3, algo)
         custom = {k: _SAFE_REPLACEMENTS[k] for k in pickled if k in _SAFE_REPLACEMENTS}
         custom.update(observation_space=env.observation_space, action_space=env.action_space,
