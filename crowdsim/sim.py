@@ -119,11 +119,19 @@ class CrowdSimulator:
             offsets = rotate_to(local - local.mean(axis=0), direction)
             radius = self._radii(size)
             pos = origin + offsets
-            if placement_ok(pos, radius, s.pos[act], s.radius[act], self.scenario.walls):
+            if placement_ok(pos, radius, *self._occupied(act), self.scenario.walls):
                 lateral = rotate_to(local * np.array([0.0, 1.0]), direction)
                 self._add_group(pos, target + lateral, radius)
                 return True
         return False
+
+    def _occupied(self, act: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Discs a new group must clear: positions (m, 2) and radii (m,) of the active pedestrians and of a
+        visible robot (an invisible one changes nothing in the crowd, so people may appear on it)."""
+        pos, radius = self.slots.pos[act], self.slots.radius[act]
+        if self.robot is None or not self.config.robot.visible:
+            return pos, radius
+        return np.vstack([pos, self.robot.pos[None]]), np.append(radius, self.robot.radius_m)
 
     def _add_group(self, pos: np.ndarray, goals: np.ndarray, radius: np.ndarray) -> None:
         size = len(pos)

@@ -120,4 +120,25 @@ def street_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray,
     return (start, goal) if rng.uniform() < 0.5 else (goal, start)
 
 
-ROUTES = {"circle_crossing": circle_route, "plaza": plaza_route, "crossing": street_route}
+def corridor_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Corridor: end to end 2.5 m inside the corridor (clear of where the flows appear and leave), lateral
+    offsets 1 m inside the walls, either direction, against one flow and with the other."""
+    opt = dict(crowd.sim.scenario.options)
+    length, width = float(opt.get("length_m", 20.0)), float(opt.get("width_m", 4.0))
+    y0, y1 = rng.uniform(1.0, width - 1.0, 2)
+    start, goal = np.array([2.5, y0]), np.array([length - 2.5, y1])
+    return (start, goal) if rng.uniform() < 0.5 else (goal, start)
+
+
+def door_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Bottleneck: through the door between the room (at 0.7 of its depth, clear of the spawn area) and the open
+    ground 3 m past the door, either direction (inwards it meets the evacuating crowd head-on)."""
+    size = float(dict(crowd.sim.scenario.options).get("room_m", 8.0))
+    mid = size / 2.0
+    room = np.array([0.7 * size, rng.uniform(mid - 2.0, mid + 2.0)])
+    outside = np.array([size + 3.0, rng.uniform(mid - 1.5, mid + 1.5)])
+    return (room, outside) if rng.uniform() < 0.5 else (outside, room)
+
+
+ROUTES = {"circle_crossing": circle_route, "plaza": plaza_route, "crossing": street_route,
+          "corridor": corridor_route, "bottleneck": door_route}
