@@ -6,7 +6,8 @@ Imports numpy and casadi only. Entry points:
 * :class:`PedPrediction` (the prediction input), :func:`constant_velocity_prediction`,
   :func:`frozen_prediction`;
 * :func:`robot_dynamics` (the ``casadi.Function`` the env steps the robot with) and :func:`step_robot`;
-* baselines via :func:`make_planner` (``mpc``, ``mpc_cv``, ``mpc_frozen``, ``social_force``).
+* baselines via :func:`make_planner` (``mpc``, ``mpc_cv``, ``mpc_frozen``, ``social_force``);
+* :data:`CROWD_MPC`, the recommended :class:`MPCConfig` among real crowds (crowd-risk options: planner/risk.py).
 """
 
 from planner.baselines import (
@@ -17,7 +18,7 @@ from planner.baselines import (
     SocialForcePlanner,
     make_planner,
 )
-from planner.config import ROBOT_MODELS, SOLVERS, CostWeights, MPCConfig, RobotConfig
+from planner.config import CROWD_MPC, ROBOT_MODELS, SOLVERS, CostWeights, MPCConfig, RobotConfig
 from planner.dynamics import brake_control, clip_control, model_dims, robot_dynamics, rollout, step_robot
 from planner.mpc import MPCPlanner
 from planner.prediction import (
@@ -31,6 +32,7 @@ from planner.result import PlanResult, PlanStats
 from planner.scene import polygon_to_segments, select_modes
 
 __all__ = [
+    "CROWD_MPC",
     "PLANNERS",
     "ROBOT_MODELS",
     "SOLVERS",

@@ -43,19 +43,25 @@ class _PredictionSwapMPC:
         raise NotImplementedError
 
     def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
+        """As :meth:`MPCPlanner.plan`, with the prediction replaced first. An empty scene (N = 0 or no real
+        pedestrian) is passed through unchanged; bad input raises ValueError before any work."""
         if prediction is not None:
             check_inputs(robot_state, goal, prediction, obstacles, self.mpc.dims.state_dim)
-            prediction = self._replace(prediction)
+            if np.asarray(prediction.mask, bool).any():
+                prediction = self._replace(prediction)
         return self.mpc.plan(robot_state, goal, prediction, obstacles)
 
 
 class ConstantVelocityMPC(_PredictionSwapMPC):
-    """The MPC with constant-velocity predictions (K=1) from ``prediction.history`` (T_obs >= 2 rows,
-    ``prediction.step_s`` apart); the prediction's own samples are ignored."""
+    """The MPC with constant-velocity predictions (K=1) from ``prediction.history`` (rows
+    ``prediction.step_s`` apart; a single row, or a pedestrian padded with its first position, has zero
+    velocity); the prediction's own samples are ignored. Without a history the pedestrians are frozen at
+    their current positions and the call is counted in ``stats.counts["fallback_no_history"]``."""
 
     def _replace(self, prediction: PedPrediction) -> PedPrediction:
         if prediction.history is None:
-            raise ValueError("ConstantVelocityMPC needs prediction.history (T_obs, N, 2)")
+            self.mpc.stats.counts["fallback_no_history"] += 1
+            return _frozen(prediction)
         return constant_velocity_prediction(
             prediction.history, prediction.radii, prediction.group_ids, prediction.mask,
             n_steps=np.shape(prediction.positions)[1], step_s=prediction.step_s)
@@ -65,9 +71,14 @@ class FrozenMPC(_PredictionSwapMPC):
     """The MPC with every pedestrian frozen at its current position (no prediction)."""
 
     def _replace(self, prediction: PedPrediction) -> PedPrediction:
-        return frozen_prediction(
-            current_positions(prediction), prediction.radii, prediction.group_ids, prediction.mask,
-            n_steps=np.shape(prediction.positions)[1], step_s=prediction.step_s)
+        return _frozen(prediction)
+
+
+def _frozen(prediction: PedPrediction) -> PedPrediction:
+    """``prediction`` with every pedestrian frozen at its current position (same T, step and attributes)."""
+    return frozen_prediction(
+        current_positions(prediction), prediction.radii, prediction.group_ids, prediction.mask,
+        n_steps=np.shape(prediction.positions)[1], step_s=prediction.step_s)
 
 
 @dataclass(frozen=True)

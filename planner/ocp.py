@@ -19,11 +19,13 @@ Soft constraints, all in metres (d = sqrt(|.|² + 1e-6)), at every knot p_k and,
 ``check_midpoints`` (off by default: it doubles the constraints), also half-way through each step at
 f(z_k, u_k, dt/2), which stays local to stage k and catches fast head-on passes between knots:
 
-* pedestrian m, mode j: ``mask_m (d(p, q_mj(t)) - clear_m) + s_km >= 0``;
+* pedestrian m, mode j: ``mask_m (d(p, q_mj(t)) - clear_m(t)) + s_km >= 0`` (clear_m(t) may grow with t);
 * group g, mode j: ``mask_g (d(p, capsule segment_gj(t)) - clear_gj(t)) + s_kg >= 0``;
 * wall w: ``mask_w (d(p, segment_w) - (radius + margin)) + s_k,wall >= 0``.
 
-Hard constraints: z_0 equals the measured state, velocity and acceleration bounds.
+Hard constraints: z_0 equals the measured state, velocity and acceleration bounds, and (only when
+``speed_cap_gain_per_s`` is finite) the per-stage speed cap ``v_k <= v_cap_k`` (unicycle) or
+``|u_k|² <= v_cap_k²`` (holonomic), with v_cap from planner/risk.py.
 """
 
 from __future__ import annotations
@@ -73,9 +75,9 @@ def param_shapes(sz: Sizes) -> dict[str, tuple[int, ...]]:
     """Shapes of the parameter blocks, in the order they are packed into the flat vector p."""
     return {
         "z0": (sz.nz,), "goal": (2,),
-        "ped_pos": (sz.nt, sz.m, sz.k, 2), "ped_clear": (sz.m,), "ped_mask": (sz.m,),
+        "ped_pos": (sz.nt, sz.m, sz.k, 2), "ped_clear": (sz.nt, sz.m), "ped_mask": (sz.m,),
         "grp_a": (sz.nt, sz.g, sz.k, 2), "grp_b": (sz.nt, sz.g, sz.k, 2), "grp_clear": (sz.nt, sz.g, sz.k),
-        "grp_mask": (sz.g,), "walls": (sz.w, 4), "wall_mask": (sz.w,),
+        "grp_mask": (sz.g,), "walls": (sz.w, 4), "wall_mask": (sz.w,), "v_cap": (sz.h,),
     }
 
 
@@ -166,6 +168,10 @@ def _control_terms(b: _Builder, k: int) -> None:
     else:
         b.con(ca.dot(du, du), -np.inf, (cfg.robot.max_accel_mps2 * cfg.dt_s) ** 2, k)
         b.con(ca.dot(u, u), -np.inf, cfg.robot.max_speed_mps**2, k)
+    if np.isfinite(cfg.speed_cap_gain_per_s):  # speed cap near people (planner/risk.py), built only when on
+        lhs = u[0] if cfg.robot.model == "unicycle" else ca.dot(u, u)  # speed, or speed² (holonomic)
+        cap = b.par["v_cap"][k] if cfg.robot.model == "unicycle" else b.par["v_cap"][k] ** 2
+        b.con(lhs - cap, -np.inf, 1e-6, k)
     wts = cfg.weights
     b.cost += wts.effort * ca.sumsqr(u / ub) + wts.smoothness * ca.sumsqr(du / (accel * cfg.dt_s))
 
@@ -210,7 +216,7 @@ def _collision_terms(b: _Builder, k: int) -> None:
     points, s, need = _checked_points(b, k), b.s[k], []
     for m in range(sz.m):
         exprs = [par["ped_mask"][m] * (ca.sqrt(_point_dist2(pos, par["ped_pos"][t, m, j]) + EPS_DIST_M2)
-                                       - par["ped_clear"][m])
+                                       - par["ped_clear"][t, m])
                  for pos, t in points for j in range(sz.k)]
         _soft(b, k, exprs, s[m], need)
     for gi in range(sz.g):

@@ -29,6 +29,14 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.prediction import PedPrediction, current_positions
+from planner.risk import (
+    clearance_inflation,
+    coast_reference,
+    predicted_gaps,
+    resample_scalar,
+    sample_spread,
+    speed_cap,
+)
 
 FAR_M = 1.0e3  # padding entries are placed this far from the robot
 
@@ -39,7 +47,7 @@ class SceneArrays:
     with ``check_midpoints``, else 1), M peds, K modes, G groups, W walls."""
 
     ped_pos: np.ndarray  # (nt, M, K, 2)
-    ped_clear: np.ndarray  # (M,) robot radius + ped radius + margin
+    ped_clear: np.ndarray  # (nt, M) robot radius + ped radius + margin (+ inflation, planner/risk.py)
     ped_mask: np.ndarray  # (M,) 1.0 real, 0.0 padding
     grp_a: np.ndarray  # (nt, G, K, 2) capsule segment start
     grp_b: np.ndarray  # (nt, G, K, 2) capsule segment end
@@ -49,6 +57,7 @@ class SceneArrays:
     wall_mask: np.ndarray  # (W,)
     ped_index: np.ndarray  # (m_real,) which input pedestrians fill the first rows
     start_penetration_m: float  # > 0 when the robot already overlaps a pedestrian or a wall now
+    v_cap: np.ndarray  # (H,) speed bound per stage, m/s (planner/risk.py; >= max speed when off)
 
 
 def _ped_sample_distances(positions: np.ndarray) -> np.ndarray:
@@ -186,35 +195,59 @@ def _start_penetration(robot_xy, now, radii, real, obstacles, robot_radius: floa
     return depth
 
 
-def build_scene(robot_xy: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | None,
-                cfg: MPCConfig) -> SceneArrays:
-    """Fixed-size MPC arrays from a validated prediction and obstacle segments (S, 4) or None."""
+def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | None, cfg: MPCConfig,
+                goal: np.ndarray | None = None, reference_xy: np.ndarray | None = None) -> SceneArrays:
+    """Fixed-size MPC arrays from the robot state (state_dim,) (or just its position (2,)), a validated
+    prediction and obstacle segments (S, 4) or None. ``goal`` (2,) m and ``reference_xy`` (H+1, 2) m (the
+    robot's expected path; default: coasting at its current velocity) are used by the crowd-risk options."""
+    state = np.asarray(state, float)
+    robot_xy = state[:2]
+    full_state = state if state.size > 2 else np.r_[robot_xy, np.zeros(model_state_pad(cfg))]
     h, m, k = cfg.horizon_steps, cfg.max_peds, cfg.n_modes
+    sub = 2 if cfg.check_midpoints else 1
     mask = np.asarray(pred.mask, bool)
     radii = np.where(mask, np.asarray(pred.radii, float), 0.0)
     group_ids = np.asarray(pred.group_ids)
     now = np.where(mask[:, None], current_positions(pred), robot_xy + FAR_M)
     dist = np.linalg.norm(now - robot_xy, axis=1)
     real = np.flatnonzero(mask)
-    order = real[np.argsort(dist[real], kind="stable")][:m]
+    raw = np.where(mask[None, None, :, None], np.asarray(pred.positions, float), 0.0)
+    need_samples = cfg.rank_peds_by == "predicted" or np.isfinite(cfg.speed_cap_gain_per_s)
+    samples = resample_in_time(raw, now, pred.step_s, cfg.dt_s, h) if need_samples and real.size else None
+    if cfg.rank_peds_by == "predicted" and real.size:
+        ref = coast_reference(full_state, cfg.robot.model, cfg.dt_s, h) if reference_xy is None else reference_xy
+        rank = predicted_gaps(samples[:, :, real], now[real], np.asarray(ref, float)) - radii[real]
+        order = real[np.argsort(rank, kind="stable")][:m]
+    else:
+        order = real[np.argsort(dist[real], kind="stable")][:m]
     groups = _nearest_groups(group_ids, mask, dist, cfg.max_groups)
     used = np.zeros_like(mask)
     used[order] = True
     for members in groups:
         used[members] = True
-    modes = select_modes(np.asarray(pred.positions, float), group_ids, used, k)
-    sub = 2 if cfg.check_midpoints else 1
+    modes = select_modes(raw, group_ids, used, k)
     stage_pos = resample_in_time(modes, now, pred.step_s, cfg.dt_s / sub, sub * h)  # (K, sub H, N, 2)
     ped_pos = np.broadcast_to(robot_xy + FAR_M, (sub * h, m, k, 2)).copy()
     ped_pos[:, : order.size] = np.transpose(stage_pos[:, :, order], (1, 2, 0, 3))
-    ped_clear = np.full(m, cfg.robot.radius_m + cfg.safety_margin_m)
-    ped_clear[: order.size] += radii[order]
+    ped_clear = np.full((sub * h, m), cfg.robot.radius_m + cfg.safety_margin_m)
+    ped_clear[:, : order.size] += radii[order]
+    if order.size and (cfg.clearance_growth_mps > 0 or cfg.spread_inflation > 0):
+        spread = resample_scalar(sample_spread(raw[:, :, order]), pred.step_s, cfg.dt_s / sub, sub * h)
+        ped_clear[:, : order.size] += clearance_inflation(spread, cfg, cfg.dt_s / sub)
     ped_mask = np.zeros(m)
     ped_mask[: order.size] = 1.0
     grp = _group_arrays(stage_pos, radii, groups, robot_xy, cfg)
     walls, wall_mask = _nearest_walls(obstacles, robot_xy, cfg.max_walls)
     depth = _start_penetration(robot_xy, now, radii, real, obstacles, cfg.robot.radius_m)
-    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, order, depth)
+    mean_stage = samples[:, :, real].mean(axis=0) if samples is not None else np.zeros((h, 0, 2))
+    goal = robot_xy + np.array([1.0, 0.0]) if goal is None else np.asarray(goal, float)
+    v_cap = speed_cap(full_state, goal, mean_stage, now[real], radii[real], cfg)
+    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, order, depth, v_cap)
+
+
+def model_state_pad(cfg: MPCConfig) -> int:
+    """State entries after (x, y): 3 for the unicycle (heading, v, omega), 2 for the holonomic robot."""
+    return 3 if cfg.robot.model == "unicycle" else 2
 
 
 def validate_obstacles(obstacles) -> np.ndarray | None:

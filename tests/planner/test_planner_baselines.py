@@ -44,9 +44,3 @@ def test_frozen_mpc_uses_current_positions_only():
     pred = _crossing_walker(0, 0.4)
     result = planner.plan(np.zeros(5), GOAL, pred)
     assert result.status == "solved"
-
-
-def test_cv_mpc_needs_history():
-    pred = PedPrediction(np.zeros((1, 12, 1, 2)) + 3.0, np.full(1, 0.3), np.zeros(1, int), np.ones(1, bool))
-    with pytest.raises(ValueError, match="history"):
-        make_planner("mpc_cv").plan(np.zeros(5), GOAL, pred)
