@@ -164,3 +164,17 @@ def test_ray_backend_gives_the_same_records_as_the_process_pool(tmp_path):
     assert remote["run"]["backend"] == "ray"
     assert _strip(read_records(tmp_path / "ray" / RECORDS)) == _strip(read_records(tmp_path / "local" / RECORDS))
     assert _untimed(remote) == _untimed(local)
+
+
+def test_cli_benchmark_runs_a_suite_and_resumes(tmp_path, capsys):
+    args = ["benchmark", "--suite", "smoke", "--cells", "corridor-low-visible", "--policy", "random",
+            "--out", str(tmp_path), "--workers", "1", "--no-progress"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "Leaderboard: suite smoke v1" in out and "| corridor-low-visible |" in out
+    assert "2 episodes run, 0 already recorded" in out
+    assert len(read_records(tmp_path / RECORDS)) == 2
+    assert main(args) == 0
+    assert "0 episodes run, 2 already recorded" in capsys.readouterr().out
+    assert main(["suites"]) == 0
+    assert "crowdnav-v1 v1: " in capsys.readouterr().out
