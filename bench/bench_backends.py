@@ -7,7 +7,7 @@
    wall-clock fields (checked and printed).
 2. Planner p50/p95 per cell, from a benchmark output folder (`--board DIR/leaderboard.json`), if given.
 
-Run: python bench/bench_backends.py [--episodes 24] [--workers 2] [--board out/bench-v1/leaderboard.json]
+Run: python bench/bench_backends.py [--episodes 24] [--workers 2] [--board out/bench-v1/leaderboard.json [--board-only]]
 """
 
 from __future__ import annotations
@@ -81,9 +81,13 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=24)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--board", type=Path, default=None, help="leaderboard.json of a benchmark run")
+    p.add_argument("--board-only", action="store_true", help="only the per-cell planner table of --board")
     args = p.parse_args()
+    if args.board_only and args.board is None:
+        p.error("--board-only needs --board")
     print(f"machine: {platform.machine()}, {platform.python_version()}, {time.strftime('%Y-%m-%d')}")
-    backends_table(args.episodes, args.workers)
+    if not args.board_only:
+        backends_table(args.episodes, args.workers)
     if args.board is not None:
         planner_table(args.board)
 
