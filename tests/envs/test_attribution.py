@@ -10,7 +10,7 @@ import pytest
 from envs import CrowdNavEnv
 from envs.attribution import STOPPED_MPS, collision_kind
 from envs.replay import ReplayConfig
-from tests.envs.test_env import drive_straight, place_robot, write_replay
+from tests.envs.test_env import place_robot
 
 
 def _tracks(tmp_path: Path, tracks: dict[int, list[tuple[int, float, float]]]) -> ReplayConfig:
@@ -48,34 +48,23 @@ def test_a_new_track_is_a_spawn_whatever_the_velocities():
     assert collision_kind(np.zeros(2), np.array([1.0, 0.0]), np.array([0.3, 0.0]), np.zeros(2), True) == "spawn"
 
 
-def test_env_robot_drives_into_a_standing_pedestrian(tmp_path):
-    env = CrowdNavEnv(scenario="replay", replay=write_replay(tmp_path, {1: (3.0, 0.0), 2: (20.0, 20.0)}))
+def _robot_waits_at_origin(tmp_path: Path, track: list[tuple[int, float, float]]) -> tuple[CrowdNavEnv, dict]:
+    """Pedestrian 1 follows `track` (plus one far away) while the robot stands at the origin; the final metrics."""
+    far = [(t, 30.0, 30.0) for t in range(40)]
+    env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: track, 2: far}))
     env.reset(seed=0)
-    place_robot(env, (0.0, 0.0), (6.0, 0.0))
-    infos, _ = drive_straight(env)
-    m = infos[-1]["episode_metrics"]
-    assert m["collision_kind"] == "robot"
-    assert m["collision_time_s"] == pytest.approx(m["time_s"]) and m["collision_time_s"] > 1.0
+    place_robot(env, (0.0, 0.0), (-6.0, 0.0))
+    return env, _stand_still(env)
 
 
 def test_env_pedestrian_walks_into_a_stopped_robot(tmp_path):
     # pedestrian 1 walks from x = 6 towards the robot at the origin at 1 m/s (0.4 m per 0.4 s step)
-    walker = [(t, 6.0 - 0.4 * t, 0.0) for t in range(40)]
-    far = [(t, 30.0, 30.0) for t in range(40)]
-    env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: walker, 2: far}))
-    env.reset(seed=0)
-    place_robot(env, (0.0, 0.0), (-6.0, 0.0))
-    m = _stand_still(env)
+    _, m = _robot_waits_at_origin(tmp_path, [(t, 6.0 - 0.4 * t, 0.0) for t in range(40)])
     assert m["collision"] and m["collision_kind"] == "pedestrian"
 
 
 def test_env_track_that_starts_on_the_robot_is_a_spawn(tmp_path):
     # pedestrian 1 appears at step 20 (8 s), 0.3 m from where the robot waits
-    appear = [(t, 0.3, 0.0) for t in range(20, 40)]
-    far = [(t, 30.0, 30.0) for t in range(40)]
-    env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: appear, 2: far}))
-    env.reset(seed=0)
-    place_robot(env, (0.0, 0.0), (-6.0, 0.0))
-    m = _stand_still(env)
+    env, m = _robot_waits_at_origin(tmp_path, [(t, 0.3, 0.0) for t in range(20, 40)])
     assert m["collision"] and m["collision_kind"] == "spawn"
     assert m["collision_time_s"] == pytest.approx(20 * 0.4 - env.config.warmup_s, abs=0.11)
