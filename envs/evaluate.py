@@ -59,7 +59,8 @@ def check_setup(policy: PolicyConfig, config: CrowdNavConfig) -> None:
 
 def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int = 20, seed: int = 0, workers: int = 1,
              record: int = 2, out_dir: str | Path | None = None, *, stem: str | None = None, draw: int = N_DRAWN,
-             progress: bool = True, backend: str = "local", address: str | None = None) -> dict[str, Any]:
+             progress: bool = True, backend: str = "local", address: str | None = None,
+             check: bool = True) -> dict[str, Any]:
     """Evaluate a policy (a name, or a `PolicyConfig`) on episodes seed .. seed + episodes - 1.
 
     Args:
@@ -70,6 +71,7 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
         draw: episodes drawn in the PNG's trajectories panels (the first ones).
         progress: show a tqdm bar over episodes (on stderr).
         backend, address: `envs.runner.run_tasks`.
+        check: build the env and policy once first (`check_setup`); False when the caller already did.
 
     Returns the JSON-ready summary (`envs.stats.aggregate` plus policy, policy_config, scenario, seed, config,
     episode_list and run: workers, backend, wall time, files written).
@@ -82,7 +84,8 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
                          f"{workers}, {record}")
     stem = stem or pcfg.name.replace("/", "_").replace(":", "_")
     out = check_writable_dir(out_dir) if out_dir is not None else None
-    check_setup(pcfg, config)
+    if check:
+        check_setup(pcfg, config)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(seed, seed + episodes))

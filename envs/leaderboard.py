@@ -15,7 +15,7 @@ import numpy as np
 from envs.atomic import write_json_atomic, write_text_atomic
 from envs.policies import PolicyConfig
 from envs.records import EpisodeRecord
-from envs.report import fmt, pyplot, save_figure
+from envs.report import fmt, pyplot, rate_errors, rate_text, save_figure
 from envs.stats import aggregate, paired_comparison
 from envs.suite import Cell, Suite
 
@@ -56,10 +56,7 @@ def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig],
 
 
 def _cell_rate(res: dict[str, Any] | None, key: str) -> str:
-    if res is None or res[key] is None:
-        return "–"
-    ci = res[f"{key}_ci95"]
-    return f"{res[key]:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]"
+    return "–" if res is None else rate_text(res, key)
 
 
 def _matrix(board: dict[str, Any], key: str, title: str) -> list[str]:
@@ -129,13 +126,9 @@ def leaderboard_png(board: dict[str, Any], path: str | Path) -> None:
     x = np.arange(len(rows))
     for ax, key in zip(axes, ("success_rate", "collision_rate"), strict=True):
         for j, name in enumerate(names):
-            vals, err = np.zeros(len(rows)), np.zeros((2, len(rows)))
-            for i, (_, res) in enumerate(rows):
-                r = res.get(name)
-                if r is not None and r[key] is not None:
-                    vals[i] = r[key]
-                    err[:, i] = [r[key] - r[f"{key}_ci95"][0], r[f"{key}_ci95"][1] - r[key]]
-            ax.bar(x + (j - (len(names) - 1) / 2) * width, vals, width, yerr=np.maximum(err, 0.0), capsize=2,
+            results = [res.get(name) or {key: None} for _, res in rows]
+            vals = np.array([r[key] or 0.0 for r in results])
+            ax.bar(x + (j - (len(names) - 1) / 2) * width, vals, width, yerr=rate_errors(results, key), capsize=2,
                    label=name)
         ax.set_ylabel(key.replace("_", " ") + " (95% CI)")
         ax.set_ylim(0, 1.05)

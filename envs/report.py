@@ -29,7 +29,7 @@ def fmt(value: Any, digits: int = 2) -> str:
     return str(value)
 
 
-def _rate(result: dict[str, Any], key: str) -> str:
+def rate_text(result: dict[str, Any], key: str) -> str:
     ci = result.get(f"{key}_ci95")
     text = fmt(result[key])
     return f"{text} [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else text
@@ -50,9 +50,9 @@ def markdown_table(result: dict[str, Any]) -> str:
     """A markdown table of one policy's summary."""
     rows = [
         ("episodes", str(result["episodes"])),
-        ("success rate [95% CI]", _rate(result, "success_rate")),
-        ("collision rate [95% CI]", _rate(result, "collision_rate")),
-        ("avoidable collision rate [95% CI]", _rate(result, "avoidable_collision_rate")),
+        ("success rate [95% CI]", rate_text(result, "success_rate")),
+        ("collision rate [95% CI]", rate_text(result, "collision_rate")),
+        ("avoidable collision rate [95% CI]", rate_text(result, "avoidable_collision_rate")),
         ("collisions: robot / pedestrian / spawn",
          f"{result['collisions_robot']} / {result['collisions_pedestrian']} / {result['collisions_spawn']}"),
         ("time to first collision, mean (s)", fmt(result["time_to_first_collision_s"])),
@@ -76,8 +76,8 @@ def markdown_table(result: dict[str, Any]) -> str:
 
 
 COMPARE_COLUMNS = (
-    ("success [95% CI]", lambda r: _rate(r, "success_rate")),
-    ("collision [95% CI]", lambda r: _rate(r, "collision_rate")),
+    ("success [95% CI]", lambda r: rate_text(r, "success_rate")),
+    ("collision [95% CI]", lambda r: rate_text(r, "collision_rate")),
     ("avoidable coll.", lambda r: fmt(r["avoidable_collision_rate"])),
     ("errors", lambda r: str(r["errors"])),
     ("timeout", lambda r: fmt(r["timeout_rate"])),
@@ -117,7 +117,7 @@ def save_figure(fig: Any, path: str | Path) -> None:
     write_atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
 
 
-def _rate_errors(results: list[dict[str, Any]], key: str) -> np.ndarray:
+def rate_errors(results: list[dict[str, Any]], key: str) -> np.ndarray:
     """(2, P) asymmetric error bars of the rate `key` from its Wilson interval (zeros where there is none)."""
     err = np.zeros((2, len(results)))
     for j, r in enumerate(results):
@@ -133,7 +133,7 @@ def _rates_panel(ax: Any, results: list[dict[str, Any]]) -> None:
     x = np.arange(len(RATE_KEYS))
     for j, r in enumerate(results):
         vals = [r[k] or 0.0 for k in RATE_KEYS]
-        err = np.concatenate([_rate_errors([r], k) for k in RATE_KEYS], axis=1)
+        err = np.concatenate([rate_errors([r], k) for k in RATE_KEYS], axis=1)
         bars = ax.bar(x + (j - (len(results) - 1) / 2) * width, vals, width, yerr=err, capsize=3,
                       label=r["policy"])
         for b, v, top in zip(bars, vals, err[1], strict=True):
