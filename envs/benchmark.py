@@ -48,7 +48,7 @@ def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Polic
     existing = {r.key: r for r in recorded}
     tasks, todo, done = [], [], []
     for cell in cells:
-        for pcfg in policies:
+        for pcfg in (p.for_cell(cell.scene, cell.predictor) for p in policies):
             fp = episode_fingerprint(suite, cell, pcfg)
             for seed in cell.seeds:
                 task = EpisodeTask(cell.env_config(seed, data), pcfg, seed, cell=cell.name, fingerprint=fp,
@@ -79,8 +79,8 @@ def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Policy
     store = RecordStore(out / RECORDS)
     recorded = merge_records([store.read(), *(read_records(p) for p in merge)])  # bad files fail here
     plan = plan_benchmark(suite, cells, policies, out, data, recorded)
-    for pcfg in {t.policy.name: t.policy for t in plan.todo}.values():  # a bad plug-in fails here, not per episode
-        check_setup(pcfg, plan.todo[0].env)
+    for pcfg, task in {t.policy: t for t in plan.todo}.items():  # a bad plug-in fails here, not per episode
+        check_setup(pcfg, task.env)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     with tqdm(total=len(plan.tasks), initial=len(plan.done), desc=suite.name, unit="ep",

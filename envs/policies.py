@@ -52,6 +52,7 @@ ENV_MPC = CROWD_MPC
 # 0.1 s step removed the remaining collisions of re-planning every 0.4 s on the tuning seeds (RESULTS.md).
 REPLAN_EVERY_STEPS = 1
 PREDICTOR_POLICIES = ("mpc-gpgraph",)  # registry policies that take `PolicyConfig.predictor`
+SCENE_TEMPLATE = "{scene}"  # in a predictor name: filled in per benchmark cell (`PolicyConfig.for_cell`)
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,15 @@ class PolicyConfig:
         for key in ("replan_every_steps", "n_samples", "threads"):
             if not isinstance(getattr(self, key), int) or getattr(self, key) < 1:
                 raise ValueError(f"PolicyConfig.{key} must be an integer >= 1, got {getattr(self, key)!r}")
+
+    def for_cell(self, scene: str, cell_predictor: str | None) -> PolicyConfig:
+        """This config as run in one benchmark cell: `{scene}` in the predictor becomes the cell's scene, and
+        a registry predictor policy without a predictor takes the cell's own (`cell_predictor`, if any)."""
+        if self.predictor is not None and SCENE_TEMPLATE in self.predictor:
+            return replace(self, predictor=self.predictor.replace(SCENE_TEMPLATE, scene))
+        if self.predictor is None and cell_predictor is not None and self.name in PREDICTOR_POLICIES:
+            return replace(self, predictor=cell_predictor)
+        return self
 
     def to_json(self) -> dict[str, Any]:
         """The whole config as JSON-ready data (goes into every results file)."""
@@ -231,6 +241,9 @@ def make_policy(spec: str | PolicyConfig, env: CrowdNavEnv) -> Policy:
     """The policy a `PolicyConfig` (or a bare name: its defaults) describes, for this env (its robot limits).
     Unknown names raise ValueError listing the valid ones."""
     cfg = spec if isinstance(spec, PolicyConfig) else PolicyConfig(name=spec)
+    if cfg.predictor is not None and SCENE_TEMPLATE in cfg.predictor:
+        raise ValueError(f"predictor {cfg.predictor!r}: {SCENE_TEMPLATE} is filled in per cell by crowdnav "
+                         "benchmark only; name one predictor here")
     env = env.unwrapped if hasattr(env, "unwrapped") else env
     if cfg.name.startswith(SB3_PREFIX):
         return SB3Policy(cfg.name, env, cfg.deterministic, cfg.threads)

@@ -3,9 +3,11 @@
 A suite file `envs/suites/<name>.json` holds {"name", "version", "description", "defaults", "cells": [...]}.
 A cell is either simulated ({"name", "scenario", "n_pedestrians", "robot_visible", "options"?, "episodes",
 "seed0"}) or a real-crowd replay ({"name", "replay": [files relative to the data folder], "frame_step_s",
-"episodes", "seed0"}). Episode i of a cell has seed seed0 + i; a replay cell with several files replays file
-(seed mod number of files) from a start time drawn from the seed. `defaults` are `CrowdNavConfig` fields (time
-limit, ...) applied to every cell. Every policy meets exactly the same episodes.
+"episodes", "seed0"}). Any cell may name its `scene` (default: "synthetic" for simulated cells) and the
+`predictor` that `mpc-gpgraph` uses there when none is given (real cells: the scene's leave-one-out ETH/UCY
+checkpoint, trained without that scene). Episode i of a cell has seed seed0 + i; a replay cell with several
+files replays file (seed mod number of files) from a start time drawn from the seed. `defaults` are
+`CrowdNavConfig` fields (time limit, ...) applied to every cell. Every policy meets exactly the same episodes.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 
 DEFAULT_DATA = Path("../shared/datasets/eth_ucy")
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
-              "episodes", "seed0", "note"}
+              "episodes", "seed0", "note", "scene", "predictor"}
+SIMULATED_SCENE = "synthetic"
 _DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m"}
 
 
@@ -42,6 +45,16 @@ class Cell:
     @property
     def is_real(self) -> bool:
         return "replay" in self.spec
+
+    @property
+    def scene(self) -> str:
+        """The scene name a `{scene}` predictor template takes here (simulated cells: "synthetic")."""
+        return str(self.spec.get("scene", SIMULATED_SCENE))
+
+    @property
+    def predictor(self) -> str | None:
+        """The predictor `mpc-gpgraph` uses in this cell unless one is given (None: the shipped default)."""
+        return self.spec.get("predictor")
 
     def files(self, data: Path) -> list[Path]:
         return [Path(data) / f for f in self.spec["replay"]]

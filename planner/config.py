@@ -112,6 +112,16 @@ class MPCConfig:
     speed_cap_min_mps: float = 0.3
     speed_cap_half_angle_deg: float = 90.0  # "ahead": bearing within this angle of the heading, deg
     speed_cap_lookahead_s: float = 0.0
+    # -- safety shield (planner/shield.py); shield_horizon_s = 0 (default) turns it off ---------------------
+    # The plan's first control is checked against every predicted sample at the control rate; if more than
+    # shield_max_risk of the samples come within shield_margin_m within shield_horizon_s, a safer constant
+    # command replaces it.
+    shield_horizon_s: float = 0.0  # look-ahead, s (0 = no shield)
+    shield_dt_s: float = 0.1  # time resolution of the check = the control step the command is held for, s
+    shield_margin_m: float = 0.05  # clearance below which a sample counts as hit, m
+    shield_max_risk: float = 0.1  # largest accepted fraction of hit samples, in [0, 1]
+    shield_tau_s: float = 0.8  # time constant of the discount on later violations, s
+    shield_cv: bool = True  # also avoid the last observed velocity held (needs prediction.history)
 
     def __post_init__(self) -> None:
         _check_name("solver", self.solver, SOLVERS)
@@ -122,7 +132,10 @@ class MPCConfig:
         _check_name("pedestrian ranking", self.rank_peds_by, RANKINGS)
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m",
                                    "speed_cap_min_mps", "speed_cap_lookahead_s"))
-        _check_positive(self, ("speed_cap_gain_per_s",))
+        _check_positive(self, ("speed_cap_gain_per_s", "shield_dt_s", "shield_tau_s"))
+        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m"))
+        if not 0.0 <= self.shield_max_risk <= 1.0:
+            raise ValueError(f"MPCConfig.shield_max_risk must be in [0, 1], got {self.shield_max_risk!r}")
         if not 0.0 < self.speed_cap_half_angle_deg <= 180.0:
             raise ValueError(f"MPCConfig.speed_cap_half_angle_deg must be in (0, 180], got "
                              f"{self.speed_cap_half_angle_deg!r}")

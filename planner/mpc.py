@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -14,6 +14,7 @@ from planner.ocp import OCP, build_ocp, pack_params
 from planner.prediction import PedPrediction, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
 from planner.scene import build_scene, validate_obstacles
+from planner.shield import shield_control
 
 IPOPT_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 HEADING_OFFSETS_RAD = (0.0, -0.6, 0.6, -1.2, 1.2)  # first-guess directions relative to the goal
@@ -91,8 +92,22 @@ class MPCPlanner:
             result = self._solve(state, goal, prediction, obstacles)
         except Exception as exc:  # never raise inside the control loop
             result = self._fallback(state, "solver_error", f"{type(exc).__name__}: {exc}", 0.0, 0, np.inf)
+        if self.config.shield_horizon_s > 0:
+            result = self._shield(result, state, prediction, obstacles)
         self.stats.record(result)
         return result
+
+    def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:
+        """``result`` with its first control checked by the safety shield (planner/shield.py); the shield's
+        wall time is added to ``solve_time_s``. A shield error keeps the plan's control (never raises)."""
+        start = time.perf_counter()
+        try:
+            verdict = shield_control(state, result.controls, prediction, obstacles, self.config)
+        except Exception:  # the plan's own control is still a valid (if unchecked) answer
+            return result
+        elapsed = time.perf_counter() - start
+        return replace(result, control=verdict.control, solve_time_s=result.solve_time_s + elapsed,
+                       shield_risk=verdict.risk, shielded=verdict.replaced)
 
     # -- solving -------------------------------------------------------------------------------
     def _solve(self, state, goal, prediction, obstacles) -> PlanResult:

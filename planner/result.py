@@ -20,11 +20,14 @@ class PlanResult:
     states: (H+1, state_dim) planned states, row 0 = the measured state.
     controls: (H, 2) planned controls.
     status: one of ``STATUSES``; solver_status: the solver's own return status string.
-    solve_time_s: wall time of the solver call (0 for reactive controllers).
+    solve_time_s: wall time of the solver call, plus the safety shield's check when it is on (0 for reactive
+    controllers).
     iterations: solver iterations (0 when no solver ran).
     max_slack_m: largest violation of a soft clearance constraint by the planned states, m (for a start
     in collision, how deep the robot overlaps).
     fallback: None, or how the control was made instead (``"previous_plan"`` or ``"brake"``).
+    shield_risk: the fraction of predicted samples the plan's first control came too close to (0 without a
+    shield); shielded: True when the safety shield replaced that control (``planner/shield.py``).
     """
 
     control: np.ndarray
@@ -36,6 +39,8 @@ class PlanResult:
     iterations: int = 0
     max_slack_m: float = 0.0
     fallback: str | None = None
+    shield_risk: float = 0.0
+    shielded: bool = False
 
     @property
     def fallback_used(self) -> bool:
@@ -56,6 +61,8 @@ class PlanStats:
         self.counts[result.status] += 1
         if result.fallback is not None:
             self.counts[f"fallback_{result.fallback}"] += 1
+        if result.shielded:
+            self.counts["shielded"] += 1
         if result.iterations > 0 or result.solve_time_s > 0:
             self.solve_times_s.append(result.solve_time_s)
 

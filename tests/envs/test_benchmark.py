@@ -171,10 +171,38 @@ def test_cli_benchmark_runs_a_suite_and_resumes(tmp_path, capsys):
             "--out", str(tmp_path), "--workers", "1", "--no-progress"]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "Leaderboard: suite smoke v1" in out and "| corridor-low-visible |" in out
+    assert "Leaderboard: suite smoke v2" in out and "| corridor-low-visible |" in out
     assert "2 episodes run, 0 already recorded" in out
     assert len(read_records(tmp_path / RECORDS)) == 2
     assert main(args) == 0
     assert "0 episodes run, 2 already recorded" in capsys.readouterr().out
     assert main(["suites"]) == 0
-    assert "crowdnav-v1 v1: " in capsys.readouterr().out
+    assert "crowdnav-v1 v2: " in capsys.readouterr().out
+
+
+def test_real_cells_give_mpc_gpgraph_the_scenes_leave_one_out_predictor(tmp_path):
+    """In crowdnav-v1 (version 2) a real cell runs mpc-gpgraph with the ETH/UCY checkpoint that never saw its
+    scene, a synthetic cell with the default; an explicit predictor wins, and `{scene}` is filled per cell."""
+    from envs.policies import make_policy
+    from predictor.checkpoint import PACKAGE_CHECKPOINTS
+
+    def available(name):
+        return (PACKAGE_CHECKPOINTS / f"{name}.safetensors").is_file()
+
+    suite = load_suite("crowdnav-v1")
+    cells = suite.select(["real-hotel", "plaza-low-visible"])
+    real = suite.cell("real-hotel")
+    assert real.predictor == "gpgraph-stgcnn-hotel" and available(real.predictor)
+    assert all(available(c.predictor) for c in suite.cells if c.is_real)
+    policies = [PolicyConfig("mpc-gpgraph"), PolicyConfig("mpc-cv")]
+    plan = plan_benchmark(suite, cells, policies, tmp_path)
+    by = {(t.cell, t.policy.name): t.policy for t in plan.tasks}
+    assert by["real-hotel", "mpc-gpgraph"].predictor == "gpgraph-stgcnn-hotel"
+    assert by["plaza-low-visible", "mpc-gpgraph"].predictor is None  # the shipped synthetic default
+    assert by["real-hotel", "mpc-cv"].predictor is None
+    explicit = PolicyConfig("mpc-gpgraph", predictor="gpgraph-sgcn-{scene}")
+    plan = plan_benchmark(suite, cells, [explicit], tmp_path)
+    assert {t.cell: t.policy.predictor for t in plan.tasks} == {"real-hotel": "gpgraph-sgcn-hotel",
+                                                               "plaza-low-visible": "gpgraph-sgcn-synthetic"}
+    with pytest.raises(ValueError, match="per cell"):
+        make_policy(explicit, plan.tasks[0].env)

@@ -1,0 +1,159 @@
+"""A sampling safety shield over the MPC's first control: a chance constraint checked at the control rate.
+
+The MPC plans on 0.4 s knots with a few representative modes per pedestrian. Between its knots, and for the
+samples it did not keep, a pedestrian can still reach the robot. The shield closes that gap cheaply, in numpy:
+
+1. Candidates: the MPC's plan (its controls in turn) plus a grid of constant commands. For the unicycle
+   this is forward speed x yaw rate; for the holonomic robot it is speed x direction, plus standing still.
+2. Each candidate is held for ``shield_horizon_s``. It is rolled out at ``shield_dt_s`` (the env's control
+   step) with the acceleration bounds applied, giving robot positions ``(C, T, 2)``.
+3. Every predicted sample ``(K, T, N, 2)``, resampled from the prediction's step to ``shield_dt_s``, is one
+   possible future. A candidate *hits* a sample when its clearance (centre distance - robot radius -
+   pedestrian radius) drops below ``shield_margin_m`` at some time, or it comes that close to a wall.
+   Its risk is the fraction of samples it hits.
+4. When the MPC's control has risk <= ``shield_max_risk``, it is kept. Otherwise the shield takes the candidate
+   with the least time-discounted violation ``mean_k sum_t exp(-t / shield_tau_s) * relu(margin - clearance)``
+   (m). Ties go to the candidate nearest the MPC's control.
+
+With ``shield_cv`` (default) the pedestrians' last observed velocity, held over the look-ahead, is one more
+future that counts as certain (risk 1 when hit): at this range constant velocity is hard to beat, and a learned
+predictor can under-estimate a fast walker. It needs ``prediction.history``.
+
+Contacts that already exist now (t = 0) are not counted as hits, because no control can undo them within one
+step. The discounted violation still prefers the candidate that moves away fastest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.config import MPCConfig, RobotConfig
+from planner.dynamics import clip_control, step_numpy
+from planner.prediction import PedPrediction, current_positions
+from planner.scene import resample_in_time
+
+N_SPEEDS = 5  # candidate forward speeds (unicycle) / speed magnitudes (holonomic), rest excluded
+N_TURNS = 9  # candidate yaw rates (unicycle) / directions (holonomic: 2 * N_TURNS)
+DEVIATION_WEIGHT = 1e-3  # m of discounted violation per unit of normalised control change (tie-break)
+
+
+@dataclass(frozen=True)
+class ShieldVerdict:
+    """control (2,): the control to apply; risk: the fraction of samples the MPC's control hits;
+    replaced: True when the shield chose another control; chosen_risk: the chosen control's risk."""
+
+    control: np.ndarray
+    risk: float
+    replaced: bool
+    chosen_risk: float
+
+
+def candidate_controls(robot: RobotConfig, preferred: np.ndarray) -> np.ndarray:
+    """(C, 2) constant commands, the preferred (MPC) control first."""
+    if robot.model == "unicycle":
+        speeds = np.linspace(-robot.min_speed_mps, robot.max_speed_mps, N_SPEEDS)
+        turns = np.linspace(-robot.max_yaw_rate_radps, robot.max_yaw_rate_radps, N_TURNS)
+        grid = np.stack(np.meshgrid(speeds, turns, indexing="ij"), axis=-1).reshape(-1, 2)
+    else:
+        speeds = np.linspace(0.0, robot.max_speed_mps, N_SPEEDS)[1:]
+        angles = np.linspace(-np.pi, np.pi, 2 * N_TURNS, endpoint=False)
+        dirs = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+        grid = np.vstack([np.zeros((1, 2)), (speeds[:, None, None] * dirs[None]).reshape(-1, 2)])
+    return np.vstack([np.asarray(preferred, float)[None], grid])
+
+
+def rollout_candidates(state: np.ndarray, commands: np.ndarray, dt_s: float, robot: RobotConfig) -> np.ndarray:
+    """Robot positions (C, T, 2) at +dt_s .. +T dt_s applying commands (C, T, 2) in turn, each clipped to the
+    acceleration bounds, from ``state`` (state_dim,)."""
+    x = np.tile(np.asarray(state, float), (len(commands), 1))
+    out = []
+    for k in range(commands.shape[1]):
+        x = step_numpy(x, clip_control(x, commands[:, k], dt_s, robot), dt_s, robot.model)
+        out.append(x[:, :2])
+    return np.stack(out, axis=1)
+
+
+def plan_commands(planned: np.ndarray, plan_dt_s: float, dt_s: float, n_steps: int) -> np.ndarray:
+    """The MPC's planned controls (H, 2), each held plan_dt_s, as commands (n_steps, 2) every dt_s (the last
+    control is held past the plan's end)."""
+    idx = np.minimum((dt_s * np.arange(n_steps) / plan_dt_s + 1e-9).astype(int), len(planned) - 1)
+    return np.asarray(planned, float)[idx]
+
+
+def wall_clearance(points: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
+    """Distance (m) from each point (..., 2) to the nearest wall segment (W, 4); +inf without walls."""
+    if walls is None or len(walls) == 0:
+        return np.full(points.shape[:-1], np.inf)
+    a, b = walls[:, :2], walls[:, 2:]
+    ab = b - a
+    rel = points[..., None, :] - a
+    t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    return np.linalg.norm(rel - t[..., None] * ab, axis=-1).min(-1)
+
+
+def sample_futures(prediction: PedPrediction, dt_s: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Real pedestrians' futures (K, n_steps, n, 2) at the shield's times and their radii (n,)."""
+    real = np.asarray(prediction.mask, bool)
+    positions = np.asarray(prediction.positions, float)[:, :, real]
+    now = current_positions(prediction)[real]
+    return resample_in_time(positions, now, prediction.step_s, dt_s, n_steps), np.asarray(prediction.radii)[real]
+
+
+def cv_future(prediction: PedPrediction, dt_s: float, n_steps: int) -> np.ndarray | None:
+    """Real pedestrians' constant-velocity future (1, n_steps, n, 2) from the last two history rows (the last
+    observed velocity), or None without a history of >= 2 rows."""
+    hist = prediction.history
+    if hist is None or np.shape(hist)[0] < 2:
+        return None
+    real = np.asarray(prediction.mask, bool)
+    hist = np.asarray(hist, float)[:, real]
+    vel = (hist[-1] - hist[-2]) / prediction.step_s
+    times = dt_s * np.arange(1, n_steps + 1)
+    return (current_positions(prediction)[real][None] + times[:, None, None] * vel[None])[None]
+
+
+def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, robot_radius: float,
+               walls: np.ndarray | None) -> np.ndarray:
+    """Smallest clearance (m) to any pedestrian or wall: robot (C, T, 2), futures (K, T, n, 2) -> (C, K, T)."""
+    c, t = robot_xy.shape[:2]
+    if futures.shape[2]:
+        gaps = np.linalg.norm(robot_xy[:, None, :, None, :] - futures[None], axis=-1) - radii - robot_radius
+        ped = gaps.min(-1)
+    else:
+        ped = np.full((c, max(futures.shape[0], 1), t), np.inf)
+    wall = wall_clearance(robot_xy, walls) - robot_radius
+    return np.minimum(ped, wall[:, None, :])
+
+
+def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
+                   walls: np.ndarray | None, cfg: MPCConfig) -> ShieldVerdict:
+    """Check the plan's controls (H, 2) (each held ``cfg.dt_s``; the first is the one to apply) from ``state``
+    (state_dim,) against every predicted sample and wall; replace its first control by a constant command
+    when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring)."""
+    n_steps = max(1, int(round(cfg.shield_horizon_s / cfg.shield_dt_s)))
+    planned = np.asarray(planned, float)
+    cands = candidate_controls(cfg.robot, planned[0])
+    commands = np.repeat(cands[:, None], n_steps, axis=1)
+    commands[0] = plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)
+    robot_xy = rollout_candidates(state, commands, cfg.shield_dt_s, cfg.robot)
+    futures, radii = sample_futures(prediction, cfg.shield_dt_s, n_steps)
+    cv = cv_future(prediction, cfg.shield_dt_s, n_steps) if cfg.shield_cv else None
+    if cv is not None:  # the last observed velocity, held: a future every candidate must avoid
+        futures = np.concatenate([futures, cv])
+    clear = clearances(robot_xy, futures, radii, cfg.robot.radius_m, walls)  # (C, K [+1], T)
+    short = cfg.shield_margin_m - clear
+    hit = (short > 0).any(-1)  # (C, K [+1])
+    risk = hit[:, : len(futures) - (cv is not None)].mean(-1)
+    if cv is not None:
+        risk = np.maximum(risk, hit[:, -1])  # (C,)
+    if risk[0] <= cfg.shield_max_risk:
+        return ShieldVerdict(cands[0].copy(), float(risk[0]), False, float(risk[0]))
+    weights = np.exp(-cfg.shield_dt_s * np.arange(1, n_steps + 1) / cfg.shield_tau_s)
+    violation = (np.maximum(short, 0.0) * weights).sum(-1).mean(-1)
+    scale = np.array([cfg.robot.max_speed_mps, cfg.robot.max_yaw_rate_radps if cfg.robot.model == "unicycle"
+                      else cfg.robot.max_speed_mps])
+    deviation = (((cands - cands[0]) / scale) ** 2).sum(-1)
+    best = int(np.argmin(violation + DEVIATION_WEIGHT * deviation))
+    return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))
