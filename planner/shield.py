@@ -114,13 +114,24 @@ def cv_future(prediction: PedPrediction, dt_s: float, n_steps: int) -> np.ndarra
     return (current_positions(prediction)[real][None] + times[:, None, None] * vel[None])[None]
 
 
+def within_reach(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, cfg: MPCConfig) -> np.ndarray:
+    """(n,) bool: the pedestrians that some future (K, T, n, 2) brings within the margin of a point the robot
+    could reach by then from robot_xy (2,) at its top speed; the others cannot matter to any candidate."""
+    if futures.shape[2] == 0:
+        return np.zeros(0, bool)
+    reach = cfg.robot.max_speed_mps * cfg.shield_dt_s * np.arange(1, futures.shape[1] + 1)  # (T,)
+    gap = np.linalg.norm(futures - robot_xy, axis=-1) - radii - cfg.robot.radius_m - reach[:, None]  # (K, T, n)
+    return (gap < cfg.shield_margin_m).any(axis=(0, 1))
+
+
 def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, robot_radius: float,
                walls: np.ndarray | None) -> np.ndarray:
     """Smallest clearance (m) to any pedestrian or wall: robot (C, T, 2), futures (K, T, n, 2) -> (C, K, T)."""
     c, t = robot_xy.shape[:2]
     if futures.shape[2]:
-        gaps = np.linalg.norm(robot_xy[:, None, :, None, :] - futures[None], axis=-1) - radii - robot_radius
-        ped = gaps.min(-1)
+        dx = robot_xy[:, None, :, None, 0] - futures[None, ..., 0]  # (C, K, T, n)
+        dy = robot_xy[:, None, :, None, 1] - futures[None, ..., 1]
+        ped = (np.sqrt(dx * dx + dy * dy) - radii).min(-1) - robot_radius
     else:
         ped = np.full((c, max(futures.shape[0], 1), t), np.inf)
     wall = wall_clearance(robot_xy, walls) - robot_radius
@@ -142,7 +153,8 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     cv = cv_future(prediction, cfg.shield_dt_s, n_steps) if cfg.shield_cv else None
     if cv is not None:  # the last observed velocity, held: a future every candidate must avoid
         futures = np.concatenate([futures, cv])
-    clear = clearances(robot_xy, futures, radii, cfg.robot.radius_m, walls)  # (C, K [+1], T)
+    near = within_reach(np.asarray(state, float)[:2], futures, radii, cfg)
+    clear = clearances(robot_xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls)  # (C, K [+1], T)
     short = cfg.shield_margin_m - clear
     hit = (short > 0).any(-1)  # (C, K [+1])
     risk = hit[:, : len(futures) - (cv is not None)].mean(-1)

@@ -68,10 +68,15 @@ def build_mpc_config(robot, overrides: dict, base: str):
 _CACHE: dict = {}
 
 
-def _init_worker() -> None:
+def _init_worker(predictor: str | None = None) -> None:
     import torch
 
+    global PREDICTOR
+    PREDICTOR = predictor
     torch.set_num_threads(1)
+
+
+PREDICTOR: str | None = None  # --predictor (None: the env's default); set in the worker by _init_worker
 
 
 def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, base: str):
@@ -88,7 +93,7 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
         env = CrowdNavEnv(cfg)
         mpc_cfg = build_mpc_config(cfg.robot, overrides, base)
         if policy == "mpc-gpgraph":
-            pol = GPGraphPolicy(mpc_cfg)
+            pol = GPGraphPolicy(mpc_cfg) if PREDICTOR is None else GPGraphPolicy(mpc_cfg, PREDICTOR)
         else:
             pol = PlannerPolicy("mpc-cv", ConstantVelocityMPC(mpc_cfg), singleton_prediction)
         _CACHE[key] = (cfg, env, pol)
@@ -168,6 +173,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=20, help="episodes per recording (seeds seed0, seed0+1, ..)")
     ap.add_argument("--seed0", type=int, default=1000)
     ap.add_argument("--workers", type=int, default=2, choices=(1, 2))
+    ap.add_argument("--predictor", default=None, help="mpc-gpgraph's predictor (default: the env's); note that "
+                    "every packaged ETH/UCY checkpoint was trained on the tuning recordings")
     ap.add_argument("--json", type=Path, default=None, help="also write every episode's record here")
     args = ap.parse_args(argv)
 
@@ -183,7 +190,8 @@ def main(argv: list[str] | None = None) -> int:
              for seed in range(args.seed0, args.seed0 + args.episodes)]
     start = time.perf_counter()
     ctx = mp.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx, initializer=_init_worker) as pool:
+    with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx, initializer=_init_worker,
+                             initargs=(args.predictor,)) as pool:
         records = list(pool.map(run_one, tasks, chunksize=max(1, args.episodes // 4)))
     print(f"{len(records)} episodes in {time.perf_counter() - start:.0f} s")
     for r in records:
