@@ -206,5 +206,5 @@ def test_policy_flags_reach_the_results_json(tmp_path):
     assert code == 0
     saved = json.loads((tmp_path / "mpc-cv.json").read_text())
     assert saved["policy_config"]["mpc"]["safety_margin_m"] == 0.45
-    assert saved["policy_config"]["mpc"]["check_midpoints"] is True  # the env's MPC, not the planner default
+    assert saved["policy_config"]["mpc"]["shield_horizon_s"] == 1.6  # the env's MPC, not the planner default
     assert saved["policy_config"]["replan_every_steps"] == 2
