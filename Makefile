@@ -40,11 +40,11 @@ bench: setup
 	$(PY) bench/bench_planner.py --quick
 	$(PY) bench/bench_env.py --quick
 
-# The planner benchmark behind RESULTS.md ("Planner benchmark"): suite crowdnav-v1 (5 real ETH/UCY replays x 50
+# The planner benchmark behind RESULTS.md ("Planner benchmark"): suite crowdnav-v1 v2 (5 real ETH/UCY replays x 50
 # episodes, 20 synthetic cells x 10), mpc-gpgraph, mpc-cv, mpc-none and social-force, 2 workers. Resumable: rerun
-# to continue a killed run. Prints the leaderboard; files in out/bench-v1. Not run in CI.
+# to continue a killed run. Prints the leaderboard; files in out/bench-v2. Not run in CI.
 benchmark: setup
-	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v1 --data ../shared/datasets/eth_ucy
+	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v2 --data ../shared/datasets/eth_ucy
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
 # (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~40 min on one CPU core. Not run in CI. See RESULTS.md.
