@@ -115,3 +115,25 @@ def test_the_planner_counts_shield_interventions_and_keeps_its_plan_otherwise():
     assert b.shielded == (shielded.stats.counts["shielded"] == 1)
     if not b.shielded:
         assert np.allclose(a.control, b.control)
+
+
+def test_the_reach_filter_never_changes_the_verdict(monkeypatch):
+    """Dropping pedestrians the robot cannot reach in time is exact: same control and risks as checking all."""
+    import planner.shield as shield
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        n = int(rng.integers(1, 30))
+        now = rng.uniform(-6, 6, (n, 2))
+        vel = rng.normal(0, 1.2, (n, 2))
+        t = 0.4 * np.arange(1, 13)[None, :, None, None]
+        pos = now + t * (vel + rng.normal(0, 0.3, (20, 1, n, 2)))
+        hist = now + 0.4 * np.arange(-7, 1)[:, None, None] * vel
+        pred = PedPrediction(pos, np.full(n, 0.3), np.arange(n), np.ones(n, bool), current=now, history=hist)
+        state = np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi), rng.uniform(0, 1.2), 0.0])
+        filtered = shield_control(state, STRAIGHT, pred, None, SHIELD)
+        with monkeypatch.context() as m:
+            m.setattr(shield, "within_reach", lambda xy, f, r, c: np.ones(f.shape[2], bool))
+            full = shield_control(state, STRAIGHT, pred, None, SHIELD)
+        assert np.allclose(filtered.control, full.control)
+        assert (filtered.risk, filtered.chosen_risk, filtered.replaced) == (full.risk, full.chosen_risk, full.replaced)
