@@ -22,6 +22,10 @@ class PedHistory:
     def __len__(self) -> int:
         return len(self._snaps)
 
+    def times_seen(self, ped_id: int) -> int:
+        """In how many of the kept snapshots (at most `length`) pedestrian `ped_id` appears."""
+        return sum(int(ped_id) in ids for ids, _ in self._snaps)
+
     def record(self, ped_id: np.ndarray, pos: np.ndarray) -> None:
         """Add a snapshot: ids (n,) int and positions (n, 2) m of the pedestrians in the scene."""
         order = np.argsort(ped_id, kind="stable")

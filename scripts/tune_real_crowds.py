@@ -112,7 +112,7 @@ def _collision_geometry(env) -> dict:
     bearing = np.degrees(np.arctan2(rel[i, 1], rel[i, 0]) - state[2])
     # 0.4 s snapshots (of the last 8) that contain the collider: <= SPAWN_SNAPSHOTS means it appeared (was first
     # annotated) so shortly before the collision that no planner could have reacted ("spawn" collision).
-    seen = sum(peds.ped_id[i] in ids for ids, _ in env.history._snaps)
+    seen = env.history.times_seen(peds.ped_id[i])
     return {"robot_speed": float(state[3]), "bearing_deg": float((bearing + 180) % 360 - 180),
             "ped_speed": float(np.linalg.norm(peds.vel[i])), "seen_snapshots": int(seen),
             "spawn": bool(seen <= SPAWN_SNAPSHOTS)}

@@ -277,3 +277,13 @@ def test_history_between_ticks_is_interpolated_to_end_now():
     np.testing.assert_array_equal(hist[-1], p.pos)
     expect = 0.75 * at_tick[:-1, rows] + 0.25 * at_tick[1:, rows]
     np.testing.assert_allclose(hist[:-1, keep], expect)
+
+
+def test_history_counts_the_snapshots_a_pedestrian_appears_in():
+    from envs.history import PedHistory
+
+    hist = PedHistory(length=3)
+    for k in range(5):  # ped 1 in every snapshot, ped 2 only in the last two, ped 3 only in the first (dropped)
+        ids = [1, 2] if k >= 3 else ([1, 3] if k == 0 else [1])
+        hist.record(np.array(ids), np.zeros((len(ids), 2)))
+    assert (hist.times_seen(1), hist.times_seen(2), hist.times_seen(3), hist.times_seen(9)) == (3, 2, 0, 0)
