@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[dev,bench,viz,rl,ray]"
+	$(PY) -m pip install --quiet -e ".[dev,bench,rl,ray]"
 	touch $(STAMP)
 
 # Main job on built-in defaults: a grouped crowd, GP-Graph prediction and the MPC robot end to end; writes the

@@ -24,15 +24,18 @@ Entities (timelines `step`, a sequence, and `sim_time`, a duration in s):
 Optional data that is absent at a step is not logged; when it was shown before, a single `rr.Clear` hides it so
 the viewer does not keep showing a stale plan.
 
-Atomic write: the stream goes to a hidden temporary file next to `path` and is renamed to `path` by `close()`
-(also on leaving a `with` block through an exception). A process killed before `close()` leaves only the
-temporary `.<name>.<hex>.part` file, never a truncated `path`.
+Atomic write: the stream goes to a hidden temporary file next to `path` and is renamed to `path` when the observer
+is finalised: by `close()`, on leaving a `with` block (also through an exception), when the observer is garbage
+collected, or at interpreter exit, whichever comes first (so `RerunObserver(path).log(frame)` writes `path`). A
+process killed by a signal before that leaves only the temporary `.<name>.<hex>.part` file, never a truncated
+`path`.
 """
 
 from __future__ import annotations
 
 import os
 import uuid
+import weakref
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -49,6 +52,14 @@ GOAL_COLOUR = (255, 255, 255)
 PLAN_COLOUR = (255, 255, 255)
 PREDICTED_GROUP_COLOUR = (160, 160, 160)
 MAX_CLASS_ID = 65535  # rerun class ids are uint16
+
+
+def _finalise(rec: Any, tmp: Path, path: Path) -> None:
+    """Flush a recording stream and move its temporary file into place at `path`."""
+    rec.flush()
+    rec.disconnect()
+    if tmp.exists():
+        os.replace(tmp, path)
 
 
 def _flip(xy: np.ndarray) -> np.ndarray:
@@ -78,6 +89,8 @@ class RerunObserver:
         self._tmp = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:8]}.part")
         self.rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         self.rec.save(str(self._tmp))
+        # Runs once: on close(), garbage collection or interpreter exit (it must not refer to self).
+        self._finalizer = weakref.finalize(self, _finalise, self.rec, self._tmp, self.path)
         self._n_classes = 0  # class ids covered by the logged annotation context
         self._started = False
         self._closed = False
@@ -154,9 +167,7 @@ class RerunObserver:
         if self._closed:
             return
         self._closed = True
-        self.rec.flush()
-        self.rec.disconnect()
-        os.replace(self._tmp, self.path)
+        self._finalizer()
 
     def __enter__(self) -> RerunObserver:
         return self

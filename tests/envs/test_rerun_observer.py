@@ -177,3 +177,36 @@ def test_module_imports_without_rerun(monkeypatch):
     module = importlib.import_module("envs.rerun_observer")
     with pytest.raises(ImportError):
         module.RerunObserver("never.rrd")
+
+
+def test_the_readme_one_liner_writes_the_file_without_close(tmp_path):
+    """`RerunObserver(path).log(frame)` (README): the file is finalised when the observer is collected."""
+    import gc
+
+    pytest.importorskip("rerun")
+    from envs.rerun_observer import RerunObserver
+
+    path = tmp_path / "one.rrd"
+    RerunObserver(path).log(_episode()[0])
+    gc.collect()
+    assert [p.name for p in tmp_path.iterdir()] == ["one.rrd"]  # no hidden .part left behind
+    assert "/world/pedestrians" in _read(path)
+
+
+def test_an_unclosed_observer_is_finalised_at_interpreter_exit(tmp_path):
+    import subprocess
+    import textwrap
+
+    pytest.importorskip("rerun")
+    script = textwrap.dedent(f"""
+        import sys
+        sys.path[:0] = {sys.path!r}
+        from tests.envs.test_rerun_observer import _episode
+        from envs.rerun_observer import RerunObserver
+        KEEP = RerunObserver({str(tmp_path / "exit.rrd")!r})  # a module global: alive until exit
+        for frame in _episode()[:3]:
+            KEEP.log(frame)
+    """)
+    subprocess.run([sys.executable, "-c", script], check=True, timeout=120)
+    assert [p.name for p in tmp_path.iterdir()] == ["exit.rrd"]
+    assert len(_read(tmp_path / "exit.rrd")["/world/pedestrians"]["step"]) == 3
