@@ -2,17 +2,19 @@
 
 `import envs` registers `crowdnav/CrowdNav-v0` (`gymnasium.make("crowdnav/CrowdNav-v0", config=...)`).
 Public API: `CrowdNavEnv`, `CrowdNavConfig` (with `ObservationConfig`, `RewardWeights`), `make_policy`,
-`POLICIES`. torch (the predictor) is imported only when a predictor is used; rerun only by the observer.
+`PolicyConfig`, `POLICIES`. torch (the predictor) is imported only when a predictor is used; rerun only by the observer.
 """
 
 import gymnasium
 
 from envs.config import CrowdNavConfig, ObservationConfig, RewardWeights
 from envs.env import CrowdNavEnv
+from envs.policies import POLICIES, PolicyConfig, make_policy
 
 ENV_ID = "crowdnav/CrowdNav-v0"
 
 if ENV_ID not in gymnasium.registry:
     gymnasium.register(id=ENV_ID, entry_point="envs.env:CrowdNavEnv", disable_env_checker=False)
 
-__all__ = ["ENV_ID", "CrowdNavConfig", "CrowdNavEnv", "ObservationConfig", "RewardWeights"]
+__all__ = ["ENV_ID", "POLICIES", "CrowdNavConfig", "CrowdNavEnv", "ObservationConfig", "PolicyConfig", "RewardWeights",
+           "make_policy"]

@@ -141,6 +141,10 @@ class CrowdNavConfig:
             raise ValueError(f"unknown scenario {self.scenario!r}; valid names: {', '.join(valid)}")
         if self.scenario == REPLAY_SCENARIO and self.replay is None:
             raise ValueError("scenario 'replay' needs replay=ReplayConfig(path=...)")
+        if not isinstance(self.robot, RobotConfig):
+            raise TypeError(f"CrowdNavConfig.robot must be planner.RobotConfig (the robot's kinematic limits), got "
+                            f"{type(self.robot).__module__}.{type(self.robot).__name__}; crowdsim.RobotConfig "
+                            "describes the robot as the crowd sees it and is built by the env")
         if self.n_pedestrians < 1:
             raise ValueError(f"n_pedestrians must be >= 1, got {self.n_pedestrians}")
         _positive(self, ("dt_s", "time_limit_s", "goal_tolerance_m", "discomfort_distance_m", "group_span_m"))

@@ -185,5 +185,7 @@ PLANNERS = {
 def make_planner(name: str, config: MPCConfig | None = None):
     """Build a planner by name; raise ValueError listing the valid names if unknown."""
     if name not in PLANNERS:
-        raise ValueError(f"unknown planner {name!r}; valid names: {', '.join(PLANNERS)}")
+        hint = f" (planner names use underscores: {name.replace('-', '_')!r}; the hyphenated names are the env's " \
+            "policies, envs.make_policy)" if name.replace("-", "_") in PLANNERS else ""
+        raise ValueError(f"unknown planner {name!r}; valid names: {', '.join(PLANNERS)}{hint}")
     return PLANNERS[name](config) if config is not None else PLANNERS[name]()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
-from envs.policies import POLICIES, make_policy
+from envs.policies import POLICIES, PolicyConfig, make_policy
 from envs.rollout import run_episode
 
 CFG = CrowdNavConfig(n_pedestrians=16, time_limit_s=30.0)
@@ -98,3 +98,18 @@ def test_every_policy_handles_an_empty_scene_a_one_tick_pedestrian_and_one_leavi
     stats = getattr(policy, "stats", None)
     if name.startswith("mpc"):
         assert stats.counts["calls"] == info["episode_metrics"]["steps"]
+
+
+def test_public_api_and_clashing_names_give_clear_errors():
+    import crowdsim
+    import envs
+    from planner import make_planner
+
+    assert envs.make_policy is make_policy and "mpc-cv" in envs.POLICIES and envs.PolicyConfig is PolicyConfig
+    with pytest.raises(TypeError, match=r"planner\.RobotConfig"):
+        envs.CrowdNavConfig(robot=crowdsim.RobotConfig())
+    with pytest.raises(ValueError, match=r"underscores: 'mpc_cv'"):
+        make_planner("mpc-cv")
+    with pytest.raises(ValueError, match="valid names") as err:
+        make_planner("nope")
+    assert "underscores" not in str(err.value)
