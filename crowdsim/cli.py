@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --backend ray: connect to a running Ray cluster instead of starting one")
     _common(d, 300.0)
     m = sub.add_parser("demo", help="generate and record a grouped crowd on built-in defaults")
-    m.add_argument("--out", type=Path, default=Path("out/demo"))
+    m.add_argument("--out", type=Path, default=Path("out/demo-crowd"))
     sub.add_parser("scenarios", help="list the scenario names")
     return parser
 

@@ -7,7 +7,7 @@ Examples::
         --protocol iid --seed 0 --json hotel.json
     gpgraph evaluate --checkpoint ../shared/reference/gpgraph_sgcn/hotel/val_best.pth --backbone sgcn \
         --grouping official --data ../shared/datasets/eth_ucy/hotel --protocol paper
-    gpgraph predict --checkpoint gpgraph-stgcnn-hotel --history hist.npy --out pred.npz
+    gpgraph predict --checkpoint gpgraph-stgcnn-hotel --history out/hist.npy --out out/pred.npz
 """
 
 from __future__ import annotations
@@ -87,14 +87,49 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_predict(args: argparse.Namespace) -> int:
     from predictor.api import GPGraphPredictor
 
+    out = _check_output_file(args.out, ".npz")
+    history = _load_history(args.history)
     model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping)
     if args.sample_level:
         model.config = replace(model.config, sample_level=args.sample_level)
-    history = np.load(args.history)
     pred = GPGraphPredictor(model).predict(history, n_samples=args.samples, rng=np.random.default_rng(args.seed))
-    np.savez(args.out, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
-    print(f"wrote {args.out}: samples {pred.samples.shape}, groups {pred.group_id.tolist()}")
+    tmp = out.with_name(f".{out.name}.part")
+    with open(tmp, "wb") as fh:  # a file handle: numpy writes exactly here (a path would gain ".npz")
+        np.savez(fh, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
+    tmp.replace(out)
+    print(f"wrote {out}: samples {pred.samples.shape}, groups {pred.group_id.tolist()}")
     return 0
+
+
+def _check_output_file(path: Path, suffix: str) -> Path:
+    """`path` if it names a writable file ending in `suffix` (its folder is created); ValueError otherwise."""
+    path = Path(path)
+    if path.suffix != suffix:
+        raise ValueError(f"--out {path}: the file name must end in {suffix}")
+    if path.is_dir():
+        raise ValueError(f"--out {path} is a folder; give a file name")
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"--out {path}: {parent} is a file, not a folder")
+            break
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _load_history(path: Path) -> np.ndarray:
+    """An (8, N, 2) float history from a numpy .npy file; ValueError naming the file otherwise."""
+    if not Path(path).is_file():
+        raise ValueError(f"--history {path}: no such file (expected a numpy .npy array of shape (8, N, 2), metres)")
+    try:
+        history = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError):
+        raise ValueError(f"--history {path}: not a numpy .npy array file; save one with numpy.save "
+                         "(shape (8, N, 2), metres)") from None
+    if not isinstance(history, np.ndarray) or history.ndim != 3 or history.shape[2] != 2:
+        raise ValueError(f"--history {path}: expected shape (8, N, 2), got "
+                         f"{getattr(history, 'shape', type(history).__name__)}")
+    return history
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -140,7 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common(r)
     r.add_argument("--checkpoint", required=True)
     r.add_argument("--history", type=Path, required=True, help=".npy file, shape (8, N, 2), metres")
-    r.add_argument("--out", type=Path, required=True, help=".npz output")
+    r.add_argument("--out", type=Path, required=True, help="output file, must end in .npz")
     r.add_argument("--samples", type=int, default=20)
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
@@ -162,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except (CheckpointError, DataFormatError, FileNotFoundError, ValueError) as exc:
         print(f"gpgraph: error: {exc}", file=sys.stderr)
-        return 1
+        return 2
 
 
 if __name__ == "__main__":

@@ -81,6 +81,38 @@ def test_predict_command(tmp_path: Path) -> None:
                  "--samples", "5"]) == 0
     with np.load(out) as z:
         assert z["samples"].shape == (5, 12, 3, 2) and z["group_id"].shape == (3,)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.npy", "m.pt", "p.npz"]  # exactly --out, no temp left
+
+
+@pytest.mark.parametrize("case", ["history_dir", "history_text", "history_shape", "out_suffix", "out_under_file",
+                                  "out_is_dir"])
+def test_predict_misuse_is_one_line_exit_2_and_writes_nothing(tmp_path: Path, capsys, case: str) -> None:
+    hist = tmp_path / "h.npy"
+    np.save(hist, np.zeros((8, 3, 2)))
+    (tmp_path / "notes.txt").write_text("0 1 2.0 3.0\n")
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "adir.npz").mkdir()
+    history, out = str(hist), str(tmp_path / "p.npz")
+    if case == "history_dir":
+        history = str(tmp_path)
+    elif case == "history_text":
+        history = str(tmp_path / "notes.txt")
+    elif case == "history_shape":
+        np.save(tmp_path / "flat.npy", np.zeros((8, 3)))
+        history = str(tmp_path / "flat.npy")
+    elif case == "out_suffix":
+        out = str(tmp_path / "p")
+    elif case == "out_under_file":
+        out = str(tmp_path / "afile" / "p.npz")
+    else:
+        out = str(tmp_path / "adir.npz")
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    code = main(["predict", "--checkpoint", "gpgraph-stgcnn-hotel", "--history", history, "--out", out])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("gpgraph: error:") and err.count("\n") == 1 and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+    if case == "history_text":
+        assert "numpy .npy" in err and "pickle" not in err
 
 
 def test_cli_reports_errors_cleanly(tmp_path: Path, capsys) -> None:
@@ -89,14 +121,14 @@ def test_cli_reports_errors_cleanly(tmp_path: Path, capsys) -> None:
     (bad / "test" / "x.txt").write_text("10 1 0 0\n10 2 oops 0\n")
     ckpt = tmp_path / "cut.pt"
     ckpt.write_bytes(b"PK\x03\x04garbage")
-    assert main(["evaluate", "--checkpoint", str(ckpt), "--data", str(bad)]) == 1
+    assert main(["evaluate", "--checkpoint", str(ckpt), "--data", str(bad)]) == 2
     assert "cannot read checkpoint" in capsys.readouterr().err
     torch.manual_seed(0)
     from predictor.checkpoint import save_model
 
     good = tmp_path / "m.pt"
     save_model(GPGraph(GPGraphConfig(backbone="stgcnn")), good)
-    assert main(["evaluate", "--checkpoint", str(good), "--data", str(bad)]) == 1
+    assert main(["evaluate", "--checkpoint", str(good), "--data", str(bad)]) == 2
     assert "x.txt:2" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["evaluate", "--checkpoint", str(good), "--data", str(bad), "--protocol", "bogus"])
@@ -117,5 +149,5 @@ def test_train_rejects_a_scene_with_one_pedestrian(tmp_path: Path, capsys) -> No
     for split in ("train", "val"):
         (tmp_path / split).mkdir()
         (tmp_path / split / "solo.txt").write_text("".join(f"{10 * f}\t1\t{0.1 * f}\t0.0\n" for f in range(30)))
-    assert _train(tmp_path, tmp_path / "out", 1) == 1
+    assert _train(tmp_path, tmp_path / "out", 1) == 2
     assert "no windows with >= 2 pedestrians" in capsys.readouterr().err
