@@ -122,16 +122,3 @@ def write_files(folder: Path, files: RecordingFiles) -> dict[str, Path]:
 def write_recording(folder: Path, name: str, log: TrajectoryLog, metadata: dict[str, Any]) -> dict[str, Path]:
     """Write X.txt, X.groups.txt, X.labels.tsv and X.json into folder; returns their paths."""
     return write_files(folder, recording_files(name, log, metadata))
-
-
-def read_groups_file(path: Path) -> list[list[int]]:
-    """Parse a BIWI-style group file: one group per line, ids separated by whitespace, blank lines skipped."""
-    groups = []
-    for lineno, line in enumerate(Path(path).read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            groups.append([int(float(tok)) for tok in line.split()])
-        except ValueError as exc:
-            raise ValueError(f"{path}:{lineno}: malformed group line {line!r}") from exc
-    return groups

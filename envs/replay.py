@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.state import CrowdState
+from predictor.ethucy import read_groups, read_trajectories  # the one ETH/UCY reader (torch-free)
 
 START_MODES = ("random", "fixed")
 _SNAP = 1e-9  # times within this many annotation steps of a whole step are snapped onto it
@@ -102,65 +103,6 @@ def _check(ok: bool, message: str) -> None:
 def _snap(u: float) -> float:
     """u (annotation steps) snapped onto the nearest whole step when within `_SNAP` of it."""
     return float(round(u)) if abs(u - round(u)) < _SNAP else u
-
-
-def read_trajectories(path: Path | str) -> np.ndarray:
-    """Read an ETH/UCY-format file into an (R, 4) float array of rows (frame, ped, x, y), file order.
-
-    Blank lines are skipped. A row without exactly 4 numbers, with a non-finite value, with a ped id that is not
-    a whole number, or repeating a (frame, ped) pair raises ValueError naming `path:line` (1-based).
-    """
-    path = Path(path)
-    rows: list[tuple[float, ...]] = []
-    seen: set[tuple[float, float]] = set()
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
-        tokens = line.split()
-        if not tokens:
-            continue
-        where = f"{path}:{lineno}"
-        if len(tokens) != 4:
-            raise ValueError(f"{where}: expected 4 columns (frame ped x y), got {len(tokens)}: {line!r}")
-        try:
-            row = tuple(float(tok) for tok in tokens)
-        except ValueError as exc:
-            raise ValueError(f"{where}: non-numeric value in {line!r}") from exc
-        if not all(math.isfinite(v) for v in row):
-            raise ValueError(f"{where}: non-finite value in {line!r}")
-        if row[1] != round(row[1]):
-            raise ValueError(f"{where}: pedestrian id {tokens[1]!r} is not a whole number")
-        if row[:2] in seen:
-            raise ValueError(f"{where}: pedestrian {int(row[1])} appears twice in frame {tokens[0]}")
-        seen.add(row[:2])
-        rows.append(row)
-    if not rows:
-        raise ValueError(f"{path}: no trajectory rows (empty file)")
-    return np.array(rows, dtype=float)
-
-
-def read_groups(path: Path | str) -> list[list[int]]:
-    """Read a group file: one group per line, whole-number ped ids separated by whitespace; blank lines skipped.
-
-    A non-numeric or fractional id, or a pedestrian listed twice, raises ValueError naming `path:line`.
-    """
-    path = Path(path)
-    groups: list[list[int]] = []
-    seen: set[int] = set()
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            values = [float(tok) for tok in line.split()]
-        except ValueError as exc:
-            raise ValueError(f"{path}:{lineno}: malformed group line {line!r}") from exc
-        if not all(math.isfinite(v) and v == round(v) for v in values):
-            raise ValueError(f"{path}:{lineno}: group ids must be whole numbers: {line!r}")
-        ids = [int(v) for v in values]
-        repeated = (set(ids) & seen) or (len(set(ids)) < len(ids))
-        if repeated:
-            raise ValueError(f"{path}:{lineno}: a pedestrian is listed in more than one group: {line!r}")
-        seen.update(ids)
-        groups.append(ids)
-    return groups
 
 
 def infer_frame_increment(frames: np.ndarray) -> float:

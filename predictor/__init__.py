@@ -1,22 +1,33 @@
-"""GP-Graph pedestrian trajectory prediction (Bae et al., ECCV 2022) with SGCN and Social-STGCNN backbones."""
+"""GP-Graph pedestrian trajectory prediction (Bae et al., ECCV 2022) with SGCN and Social-STGCNN backbones.
 
-from predictor.api import (
-    ConstantVelocityConfig,
-    ConstantVelocityPredictor,
-    GPGraphPredictor,
-    Prediction,
-    load_predictor,
-    set_threads,
-)
-from predictor.model import GPGraph, GPGraphConfig
+The public names below load torch lazily, on first use, so that torch-free submodules (`predictor.ethucy`, the
+ETH/UCY reader that `envs` replays with) can be imported without it.
+"""
 
-__all__ = [
-    "ConstantVelocityConfig",
-    "ConstantVelocityPredictor",
-    "GPGraph",
-    "GPGraphConfig",
-    "GPGraphPredictor",
-    "Prediction",
-    "load_predictor",
-    "set_threads",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_LAZY = {
+    "ConstantVelocityConfig": "predictor.api",
+    "ConstantVelocityPredictor": "predictor.api",
+    "GPGraphPredictor": "predictor.api",
+    "Prediction": "predictor.api",
+    "load_predictor": "predictor.api",
+    "set_threads": "predictor.api",
+    "GPGraph": "predictor.model",
+    "GPGraphConfig": "predictor.model",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'predictor' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

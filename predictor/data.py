@@ -1,4 +1,4 @@
-"""Readers for ETH/UCY-format trajectory files and crowdsim group-label files.
+"""ETH/UCY recordings and splits for training: files are parsed by `predictor.ethucy` (the one reader).
 
 A trajectory file has one row per (frame, pedestrian): ``frame ped x y`` separated by tabs or
 whitespace, positions in metres. A group file (``X.groups.txt`` beside ``X.txt``) holds one group
@@ -14,12 +14,21 @@ from pathlib import Path
 
 import numpy as np
 
+from predictor.ethucy import DataFormatError, read_groups, read_labels, read_trajectories
+
+__all__ = [
+    "DataFormatError",
+    "Recording",
+    "group_file_for",
+    "list_trajectory_files",
+    "read_group_file",
+    "read_recording",
+    "read_split",
+    "read_trajectory_file",
+]
+
 GROUP_SUFFIX = ".groups.txt"
 LABELS_SUFFIX = ".labels.tsv"
-
-
-class DataFormatError(ValueError):
-    """A trajectory or group file does not follow the expected format."""
 
 
 @dataclass(frozen=True)
@@ -39,65 +48,14 @@ class Recording:
     frame_labels: np.ndarray | None = None
 
 
-def read_table(path: str | Path, fields: str = "frame ped x y") -> np.ndarray:
-    """Read whitespace-separated numeric rows with the given field names; returns (R, n_fields) float64.
-
-    Raises:
-        DataFormatError: naming the file and 1-based line for a row that is not n finite numbers.
-    """
-    path = Path(path)
-    width = len(fields.split())
-    rows: list[list[float]] = []
-    with path.open() as f:
-        for lineno, line in enumerate(f, start=1):
-            parts = line.split()
-            if not parts:
-                continue
-            if len(parts) != width:
-                raise DataFormatError(
-                    f"{path}:{lineno}: expected {width} fields '{fields}', got {len(parts)}: {line.strip()!r}"
-                )
-            try:
-                values = [float(p) for p in parts]
-            except ValueError:
-                raise DataFormatError(f"{path}:{lineno}: non-numeric field in {line.strip()!r}") from None
-            if not all(np.isfinite(values)):
-                raise DataFormatError(f"{path}:{lineno}: non-finite value in {line.strip()!r}")
-            rows.append(values)
-    if not rows:
-        return np.zeros((0, width))
-    return np.asarray(rows, dtype=np.float64)
-
-
 def read_trajectory_file(path: str | Path) -> np.ndarray:
-    """Read ``frame ped x y`` rows (tabs or spaces); returns a (R, 4) float64 array, x and y in metres."""
-    return read_table(path, "frame ped x y")
+    """``frame ped x y`` rows (R, 4) float64, x and y in metres (`predictor.ethucy.read_trajectories`)."""
+    return read_trajectories(path)
 
 
 def read_group_file(path: str | Path) -> tuple[tuple[int, ...], ...]:
-    """Read a group file: one group per line, integer ped ids; blank lines are skipped.
-
-    Raises:
-        DataFormatError: for a non-integer id or an id listed in two groups.
-    """
-    path = Path(path)
-    groups: list[tuple[int, ...]] = []
-    seen: set[int] = set()
-    with path.open() as f:
-        for lineno, line in enumerate(f, start=1):
-            parts = line.split()
-            if not parts:
-                continue
-            try:
-                ids = tuple(int(float(p)) for p in parts)
-            except ValueError:
-                raise DataFormatError(f"{path}:{lineno}: non-integer ped id in {line.strip()!r}") from None
-            dup = seen.intersection(ids)
-            if dup:
-                raise DataFormatError(f"{path}:{lineno}: ped id(s) {sorted(dup)} already in another group")
-            seen.update(ids)
-            groups.append(ids)
-    return tuple(groups)
+    """The groups of a group file (`predictor.ethucy.read_groups`)."""
+    return read_groups(path)
 
 
 def group_file_for(path: Path) -> Path:
@@ -112,7 +70,7 @@ def read_recording(path: str | Path) -> Recording:
     gpath = group_file_for(path)
     groups = read_group_file(gpath) if gpath.exists() else None
     lpath = path.with_name(path.name[: -len(".txt")] + LABELS_SUFFIX)
-    labels = read_table(lpath, "frame ped group") if lpath.exists() else None
+    labels = read_labels(lpath) if lpath.exists() else None
     return Recording(path=path, rows=rows, groups=groups, frame_labels=labels)
 
 

@@ -10,8 +10,8 @@ import pytest
 
 from crowdsim.cli import main
 from crowdsim.config import GroupConfig, SimConfig
-from crowdsim.export import read_groups_file
 from crowdsim.generate import RunSpec, generate
+from predictor.ethucy import read_groups as read_groups_file  # the one ETH/UCY reader
 
 EVENTFUL = SimConfig(scenario="plaza", n_pedestrians=30,
                      groups=GroupConfig(leave_rate_hz=0.05, merge_rate_hz=0.05))

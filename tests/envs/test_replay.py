@@ -11,7 +11,8 @@ import pytest
 
 from crowdsim.config import SimConfig
 from crowdsim.generate import RunSpec, generate
-from envs.replay import ReplayConfig, ReplayCrowd, assign_slots, infer_frame_increment, read_groups
+from envs.replay import ReplayConfig, ReplayCrowd, assign_slots, infer_frame_increment
+from predictor.ethucy import read_groups
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared"
 
@@ -206,8 +207,8 @@ def test_robot_route_crosses_the_long_axis_and_avoids_pedestrians(tmp_path):
 
 
 @pytest.mark.parametrize("row, what", [
-    ("20 1 2.0", "expected 4 columns"),
-    ("20 1 2.0 1.0 7", "expected 4 columns"),
+    ("20 1 2.0", "expected 4 fields"),
+    ("20 1 2.0 1.0 7", "expected 4 fields"),
     ("20 1 abc 1.0", "non-numeric"),
     ("20 1 nan 1.0", "non-finite"),
     ("20 1 1.0 inf", "non-finite"),

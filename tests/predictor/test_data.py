@@ -106,7 +106,7 @@ def test_labels_for_singletons_and_unknown_ids() -> None:
 def test_group_file_rejects_duplicates(tmp_path: Path) -> None:
     p = tmp_path / "g.groups.txt"
     p.write_text("1 2\n2 3\n")
-    with pytest.raises(DataFormatError, match="already in another group"):
+    with pytest.raises(DataFormatError, match="already listed"):
         read_group_file(p)
 
 
