@@ -55,12 +55,19 @@ def check_history(history: np.ndarray) -> np.ndarray:
 
 
 def _check_inputs(history: np.ndarray, n_samples: int,
-                  rng: np.random.Generator | None) -> tuple[np.ndarray, np.random.Generator]:
-    """The checked (8, N, 2) history and the Generator to draw from (a fresh one when rng is None)."""
+                  rng: np.random.Generator | int | None) -> tuple[np.ndarray, np.random.Generator]:
+    """The checked (8, N, 2) history and the Generator to draw from: `rng` itself, a new one seeded with an
+    int `rng`, or a fresh unseeded one when None; anything else raises ValueError."""
     h = check_history(history)
     if not isinstance(n_samples, int | np.integer) or n_samples < 1:
         raise ValueError(f"n_samples must be a positive integer, got {n_samples!r}")
-    return h, rng if rng is not None else np.random.default_rng()
+    if rng is None or isinstance(rng, int | np.integer):
+        if rng is not None and rng < 0:
+            raise ValueError(f"an int rng is a seed and must be >= 0, got {rng}")
+        return h, np.random.default_rng(rng)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
+    return h, rng
 
 
 class GPGraphPredictor:
@@ -74,7 +81,7 @@ class GPGraphPredictor:
 
     @torch.no_grad()
     def predict(
-        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | None = None
+        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | int | None = None
     ) -> Prediction:
         """Sample ``n_samples`` futures from ``history`` (8, N, 2), m. Same rng state, same samples."""
         h, rng = _check_inputs(history, n_samples, rng)
@@ -119,7 +126,7 @@ class ConstantVelocityPredictor:
         self.config = config or ConstantVelocityConfig()
 
     def predict(
-        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | None = None
+        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | int | None = None
     ) -> Prediction:
         h, rng = _check_inputs(history, n_samples, rng)
         k = self.config.velocity_steps

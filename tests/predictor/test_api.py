@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from predictor import (
+    ConstantVelocityConfig,
     ConstantVelocityPredictor,
     GPGraph,
     GPGraphConfig,
@@ -53,6 +54,17 @@ def test_same_rng_state_same_samples(predictor: GPGraphPredictor) -> None:
     c = predictor.predict(h, rng=np.random.default_rng(4)).samples
     np.testing.assert_array_equal(a, b)
     assert not np.allclose(a, c)
+
+
+def test_an_int_rng_is_a_seed_and_other_rngs_are_refused(predictor: GPGraphPredictor) -> None:
+    h = _history(4)
+    np.testing.assert_array_equal(predictor.predict(h, rng=3).samples,
+                                  predictor.predict(h, rng=np.random.default_rng(3)).samples)
+    for bad in (-1, 0.5, "0", np.random.RandomState(0)):
+        with pytest.raises(ValueError, match="rng"):
+            predictor.predict(h, rng=bad)
+    cv = ConstantVelocityPredictor(ConstantVelocityConfig(step_noise_m=0.1))
+    np.testing.assert_array_equal(cv.predict(h, rng=5).samples, cv.predict(h, rng=np.random.default_rng(5)).samples)
 
 
 def test_group_level_latents_shared_by_members(predictor: GPGraphPredictor) -> None:
