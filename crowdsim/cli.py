@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -11,29 +12,53 @@ import numpy as np
 
 from crowdsim.config import GroupConfig, SimConfig
 from crowdsim.generate import BACKENDS, SPLITS, RunSpec, generate, make_dataset
-from crowdsim.scenarios import SCENARIOS
+from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS
 
 
 def _options(pairs: list[str]) -> tuple[tuple[str, float], ...]:
-    out = []
+    out: dict[str, float] = {}
     for item in pairs:
         key, sep, value = item.partition("=")
-        if not sep:
-            raise SystemExit(f"--option expects NAME=VALUE, got {item!r}")
+        if not sep or not key:
+            raise ValueError(f"--option expects NAME=VALUE, got {item!r}")
+        if key in out:
+            raise ValueError(f"--option {key} is given twice")
         try:
-            out.append((key, float(value)))
+            out[key] = float(value)
         except ValueError:
-            raise SystemExit(f"--option {key}: {value!r} is not a number") from None
-    return tuple(out)
+            raise ValueError(f"--option {key}: {value!r} is not a number") from None
+    return tuple(out.items())
 
 
 def _config(args: argparse.Namespace, scenario: str) -> SimConfig:
+    """The SimConfig of the flags (ValueError naming the bad flag: unknown scenario or option, bad values)."""
     if scenario not in SCENARIOS:
-        raise SystemExit(f"unknown scenario {scenario!r}; valid names: {', '.join(sorted(SCENARIOS))}")
+        raise ValueError(f"unknown scenario {scenario!r}; valid names: {', '.join(sorted(SCENARIOS))}")
+    if args.pedestrians < 1:
+        raise ValueError(f"--pedestrians must be >= 1, got {args.pedestrians}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
     groups = GroupConfig(leave_rate_hz=args.leave_rate, merge_rate_hz=args.merge_rate,
                          max_size=min(5, args.pedestrians))
     return SimConfig(scenario=scenario, n_pedestrians=args.pedestrians, groups=groups,
                      scenario_options=_options(args.option))
+
+
+def _spec(args: argparse.Namespace) -> RunSpec:
+    if not args.duration > 0 or not args.warmup >= 0:
+        raise ValueError(f"--duration must be > 0 and --warmup >= 0 s, got {args.duration} and {args.warmup}")
+    return RunSpec(args.duration, args.warmup, args.seed)
+
+
+def _check_out_dir(path: Path) -> None:
+    """ValueError unless `path` is (or can be created as) a writable folder; nothing is created here."""
+    for p in (path, *path.parents):
+        if p.exists():
+            if not p.is_dir():
+                raise ValueError(f"--out {path}: {p} is a file, not a folder")
+            if not os.access(p, os.W_OK):
+                raise ValueError(f"--out {path}: {p} is not writable")
+            return
 
 
 def _common(p: argparse.ArgumentParser, duration: float) -> None:
@@ -107,39 +132,59 @@ def _dataset_usage_error(args: argparse.Namespace) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    try:
+        return _run(args)
+    except ValueError as exc:  # bad flags or values: one line, exit 2, nothing written (checked before work)
+        return _error(str(exc))
+
+
+def _run(args: argparse.Namespace) -> int:
     if args.command == "scenarios":
-        print("\n".join(sorted(SCENARIOS)))
+        for name in sorted(SCENARIOS):
+            opts = ", ".join(f"{k}={v:g}" for k, v in SCENARIO_OPTIONS[name].items())
+            print(f"{name}  (options: {opts})")
         return 0
     if args.command == "generate":
-        paths = generate(_config(args, args.scenario), RunSpec(args.duration, args.warmup, args.seed),
-                         args.out, rrd=args.rrd, progress=True)
+        config, spec = _config(args, args.scenario), _spec(args)
+        _check_out_dir(args.out)
+        paths = generate(config, spec, args.out, rrd=args.rrd, progress=True)
         print(_summary(paths))
         return 0
     if args.command == "dataset":
-        problem = _dataset_usage_error(args)
-        if problem is not None:
-            return _error(problem)
-        scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
-        base = _config(args, scenarios[0])
-        for s in scenarios:
-            _config(args, s)
-        try:
-            out = make_dataset(args.out, scenarios, args.seeds_per_scenario, base,
-                               RunSpec(args.duration, args.warmup, args.seed), backend=args.backend,
-                               workers=args.workers, address=args.address)
-        except ConnectionError as exc:  # ray.init could not reach --address
-            print(f"crowdsim: error: cannot connect to Ray at {args.address}: {exc}", file=sys.stderr)
-            return 1
-        for split in SPLITS:
-            print(f"{split}: {len(out[split])} recordings in {args.out / split}")
-        return 0
+        return _dataset(args)
     # demo: a plaza crowd with group events, exported and recorded for rerun
+    _check_out_dir(args.out)
     config = SimConfig(scenario="plaza", n_pedestrians=60,
                        groups=replace(GroupConfig(), leave_rate_hz=0.01, merge_rate_hz=0.01))
     paths = generate(config, RunSpec(duration_s=60.0, seed=0), args.out, name="plaza_demo", rrd=True,
                      progress=True)
     print(_summary(paths))
     print(f"rerun recording: {paths['rrd']}  (view with: rerun {paths['rrd']})")
+    return 0
+
+
+def _dataset(args: argparse.Namespace) -> int:
+    problem = _dataset_usage_error(args)
+    if problem is not None:
+        return _error(problem)
+    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    if not scenarios:
+        raise ValueError("--scenarios is empty; valid names: " + ", ".join(sorted(SCENARIOS)))
+    if args.seeds_per_scenario < 3:
+        raise ValueError(f"--seeds-per-scenario must be >= 3 so that train, val and test each get a recording, "
+                         f"got {args.seeds_per_scenario}")
+    base, spec = _config(args, scenarios[0]), _spec(args)
+    for s in scenarios:
+        _config(args, s)
+    _check_out_dir(args.out)
+    try:
+        out = make_dataset(args.out, scenarios, args.seeds_per_scenario, base, spec, backend=args.backend,
+                           workers=args.workers, address=args.address)
+    except ConnectionError as exc:  # ray.init could not reach --address
+        print(f"crowdsim: error: cannot connect to Ray at {args.address}: {exc}", file=sys.stderr)
+        return 1
+    for split in SPLITS:
+        print(f"{split}: {len(out[split])} recordings in {args.out / split}")
     return 0
 
 

@@ -190,6 +190,9 @@ class SimConfig:
         ratio = self.record_dt_s / self.force_dt_s
         if abs(ratio - round(ratio)) > 1e-9:
             raise ValueError("record_dt_s must be an integer multiple of force_dt_s")
+        from crowdsim.scenarios import check_options  # lazy: scenarios is the larger module
+
+        check_options(self.scenario, dict(self.scenario_options))
 
     @property
     def physics_dt_s(self) -> float:

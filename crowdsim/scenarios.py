@@ -216,8 +216,40 @@ SCENARIOS: dict[str, Callable[[Mapping[str, float]], Scenario]] = {
 }
 
 
-def make_scenario(name: str, options: Mapping[str, float] | None = None) -> Scenario:
-    """Build a registered scenario; an unknown name raises a ValueError listing the valid ones."""
+# The options each scenario reads (`SimConfig.scenario_options`), with their defaults. Lengths (`_m`) must be
+# > 0; `density` (people/m², dense initial placement) >= 0; `periodic` / `continuous` are 0 or 1 flags.
+SCENARIO_OPTIONS: dict[str, dict[str, float]] = {
+    "corridor": {"length_m": 20.0, "width_m": 4.0, "periodic": 0.0, "density": 0.0},
+    "crossing": {"half_length_m": 10.0, "width_m": 6.0},
+    "bottleneck": {"room_m": 8.0, "door_m": 1.0, "density": 0.0, "continuous": 1.0},
+    "plaza": {"size_m": 20.0, "gate_m": 4.0},
+    "circle_crossing": {"radius_m": 6.0},
+    "open": {"size_m": 30.0},
+}
+_FLAGS = ("periodic", "continuous")
+
+
+def check_options(name: str, options: Mapping[str, float]) -> None:
+    """Raise ValueError for an unknown scenario, an option it does not read (listing the valid ones) or a value
+    out of range (lengths > 0, density >= 0, flags 0 or 1, everything finite)."""
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r}; valid names: {', '.join(sorted(SCENARIOS))}")
+    valid = SCENARIO_OPTIONS[name]
+    for key, value in options.items():
+        if key not in valid:
+            raise ValueError(f"scenario {name!r} has no option {key!r}; valid options: {', '.join(valid)}")
+        value = float(value)
+        if not np.isfinite(value):
+            raise ValueError(f"scenario option {key} must be finite, got {value!r}")
+        if key.endswith("_m") and value <= 0:
+            raise ValueError(f"scenario option {key} must be > 0 m, got {value!r}")
+        if key == "density" and value < 0:
+            raise ValueError(f"scenario option density must be >= 0 people/m^2, got {value!r}")
+        if key in _FLAGS and value not in (0.0, 1.0):
+            raise ValueError(f"scenario option {key} is a flag: 0 or 1, got {value!r}")
+
+
+def make_scenario(name: str, options: Mapping[str, float] | None = None) -> Scenario:
+    """Build a registered scenario; an unknown name or option raises a ValueError listing the valid ones."""
+    check_options(name, dict(options or {}))
     return SCENARIOS[name](dict(options or {}))

@@ -80,8 +80,8 @@ def test_cli_generate_and_dataset_layout(tmp_path, capsys):
                  "--pedestrians", "10", "--duration", "8", "--out", str(tmp_path / "ds")]) == 0
     for split in ("train", "val", "test"):
         assert len(list((tmp_path / "ds" / split).glob("*.groups.txt"))) == 2
-    with pytest.raises(SystemExit, match="valid names"):
-        main(["generate", "--scenario", "mall", "--out", str(tmp_path / "x")])
+    assert main(["generate", "--scenario", "mall", "--out", str(tmp_path / "x")]) == 2
+    assert not (tmp_path / "x").exists()
 
 
 def test_rerun_recording_holds_every_frame_colour_coded_by_group(tmp_path):
