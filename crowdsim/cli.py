@@ -7,6 +7,7 @@ import os
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -72,8 +73,30 @@ def _common(p: argparse.ArgumentParser, duration: float) -> None:
                    help="scenario option, e.g. width_m=5 (repeatable)")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """Argument errors as one line on stderr (`prog command: error: ...`, exit 2), without the usage block
+    (`--help` still shows it). Options must be spelt out in full: no abbreviations."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Make `--help` print every option's default: options without help text get their name as help, which
+    `ArgumentDefaultsHelpFormatter` completes with "(default: ...)". Returns the parser."""
+    parser.formatter_class = argparse.ArgumentDefaultsHelpFormatter
+    for action in parser._actions:
+        if action.option_strings and action.help is None and action.default is not argparse.SUPPRESS:
+            action.help = action.dest.replace("_", " ")
+    return parser
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="crowdsim", description=__doc__)
+    parser = OneLineParser(prog="crowdsim", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     g = sub.add_parser("generate", help="simulate one scenario and export ETH/UCY files")
     g.add_argument("--scenario", default="plaza", help=f"one of: {', '.join(sorted(SCENARIOS))}")
@@ -96,6 +119,8 @@ def build_parser() -> argparse.ArgumentParser:
     m = sub.add_parser("demo", help="generate and record a grouped crowd on built-in defaults")
     m.add_argument("--out", type=Path, default=Path("out/demo-crowd"))
     sub.add_parser("scenarios", help="list the scenario names")
+    for command in sub.choices.values():
+        show_defaults(command)
     return parser
 
 

@@ -16,7 +16,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from envs.cli_options import add_backend_options, add_policy_options, check_backend, default_workers, policy_configs
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
@@ -38,8 +38,30 @@ def scenario_names() -> list[str]:
     return [*sorted(SCENARIOS), REPLAY_SCENARIO]
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """Argument errors as one line on stderr (`prog command: error: ...`, exit 2), without the usage block
+    (`--help` still shows it). Options must be spelt out in full: no abbreviations."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Make `--help` print every option's default: options without help text get their name as help, which
+    `ArgumentDefaultsHelpFormatter` completes with "(default: ...)". Returns the parser."""
+    parser.formatter_class = argparse.ArgumentDefaultsHelpFormatter
+    for action in parser._actions:
+        if action.option_strings and action.help is None and action.default is not argparse.SUPPRESS:
+            action.help = action.dest.replace("_", " ")
+    return parser
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="crowdnav", description=__doc__,
+    parser = OneLineParser(prog="crowdnav", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -90,6 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in (("policies", "list the policy names"), ("scenarios", "list the scenario names"),
                        ("suites", "list the benchmark suites and their cells")):
         sub.add_parser(name, help=text)
+    for command in sub.choices.values():
+        show_defaults(command)
     return parser
 
 

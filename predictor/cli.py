@@ -17,6 +17,7 @@ import json
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 import torch
@@ -133,13 +134,35 @@ def _load_history(path: Path) -> np.ndarray:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1)")
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     p.add_argument("--backbone", default=None, help="backbone name (sgcn, stgcnn)")
     p.add_argument("--grouping", default=None, choices=["exact", "official", "ratio"])
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """Argument errors as one line on stderr (`prog command: error: ...`, exit 2), without the usage block
+    (`--help` still shows it). Options must be spelt out in full: no abbreviations."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Make `--help` print every option's default: options without help text get their name as help, which
+    `ArgumentDefaultsHelpFormatter` completes with "(default: ...)". Returns the parser."""
+    parser.formatter_class = argparse.ArgumentDefaultsHelpFormatter
+    for action in parser._actions:
+        if action.option_strings and action.help is None and action.default is not argparse.SUPPRESS:
+            action.help = action.dest.replace("_", " ")
+    return parser
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="gpgraph", description=__doc__.split("\n")[0])
+    parser = OneLineParser(prog="gpgraph", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     t = sub.add_parser("train", help="train on DATA/train, select by DATA/val loss")
     _common(t)
@@ -180,6 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
     r.set_defaults(func=cmd_predict)
+    for command in sub.choices.values():
+        show_defaults(command)
     return parser
 
 

@@ -1,0 +1,118 @@
+"""Every CLI misuse gets one line on stderr and exit 2, no traceback, and nothing is written (all three CLIs).
+Also: every option's default shows in `--help`."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+
+from crowdsim.cli import build_parser as crowdsim_parser
+from crowdsim.cli import main as crowdsim_main
+from envs.cli import build_parser as crowdnav_parser
+from envs.cli import main as crowdnav_main
+from predictor.cli import build_parser as gpgraph_parser
+from predictor.cli import main as gpgraph_main
+
+MAINS = {"crowdnav": crowdnav_main, "gpgraph": gpgraph_main, "crowdsim": crowdsim_main}
+
+# (cli, argv with {tmp} for the case's folder); fixtures there: afile (a file), h.npy (a valid history),
+# notes.txt (text), empty/ (a folder), bad.txt (a malformed ETH/UCY file).
+CASES = [
+    ("crowdnav", "evaluate --policy nope --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --episodes 0 --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --scenario mall --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --mpc safety_margin_m=0.4 --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy mpc-cv --mpc bogus_field=1 --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --out {tmp}/afile/o"),
+    ("crowdnav", "evaluate --policy random --json {tmp}/empty --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --scenario replay --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --scenario replay --replay-file {tmp}/bad.txt --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --scenario replay --replay-file {tmp}/notes.txt --pedestrians 5 "
+                 "--out {tmp}/o"),
+    ("crowdnav", "evaluate --policy mpc-cv --predictor gpgraph-stgcnn-hotel --out {tmp}/o"),
+    ("crowdnav", "evaluate --polcy random --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --epi 3 --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --replay-file {tmp}/notes.txt --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --workers 0 --out {tmp}/o"),
+    ("crowdnav", "evaluate --policy random --address auto --out {tmp}/o"),
+    ("crowdnav", "benchmark --suite nope --out {tmp}/b"),
+    ("crowdnav", "benchmark --suite smoke --cells real-mars --out {tmp}/b"),
+    ("crowdnav", "demo --episodes 0 --out {tmp}/d"),
+    ("gpgraph", "predict --checkpoint gpgraph-stgcnn-hotel --history {tmp}/empty --out {tmp}/p.npz"),
+    ("gpgraph", "predict --checkpoint gpgraph-stgcnn-hotel --history {tmp}/notes.txt --out {tmp}/p.npz"),
+    ("gpgraph", "predict --checkpoint gpgraph-stgcnn-hotel --history {tmp}/h.npy --out {tmp}/p"),
+    ("gpgraph", "predict --checkpoint gpgraph-stgcnn-hotel --history {tmp}/h.npy --out {tmp}/afile/p.npz"),
+    ("gpgraph", "predict --checkpoint no-such-model --history {tmp}/h.npy --out {tmp}/p.npz"),
+    ("gpgraph", "predict --checkpoint {tmp}/notes.txt --history {tmp}/h.npy --out {tmp}/p.npz"),
+    ("gpgraph", "evaluate --checkpoint no-such-model --data {tmp}/empty"),
+    ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/empty"),
+    ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/empty --protocol bogus"),
+    ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --threads 0"),
+    ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --epoch 3"),
+    ("crowdsim", "generate --scenario mall --out {tmp}/g"),
+    ("crowdsim", "generate --duration -5 --out {tmp}/g"),
+    ("crowdsim", "generate --duration 0 --out {tmp}/g"),
+    ("crowdsim", "generate --pedestrians 0 --out {tmp}/g"),
+    ("crowdsim", "generate --scenario corridor --option widht_m=8 --out {tmp}/g"),
+    ("crowdsim", "generate --scenario corridor --option width_m=-4 --out {tmp}/g"),
+    ("crowdsim", "generate --scenario corridor --option width_m --out {tmp}/g"),
+    ("crowdsim", "generate --out {tmp}/afile/g"),
+    ("crowdsim", "generate --duration abc --out {tmp}/g"),
+    ("crowdsim", "dataset --scenarios , --out {tmp}/ds"),
+    ("crowdsim", "dataset --seeds-per-scenario 1 --out {tmp}/ds"),
+    ("crowdsim", "dataset --address auto --out {tmp}/ds"),
+    ("crowdsim", "dataset --workers 0 --out {tmp}/ds"),
+]
+
+
+def _fixtures(tmp):
+    (tmp / "afile").write_text("x")
+    np.save(tmp / "h.npy", np.cumsum(np.full((8, 3, 2), 0.4), axis=0))
+    (tmp / "notes.txt").write_text("these are notes\n")
+    (tmp / "empty").mkdir()
+    (tmp / "bad.txt").write_text("0 1 0.0 0.0\n0 1 1.0 1.0\n")  # pedestrian 1 twice in frame 0
+
+
+def _snapshot(tmp):
+    return sorted((str(p.relative_to(tmp)), p.stat().st_size if p.is_file() else -1) for p in tmp.rglob("*"))
+
+
+def test_there_are_at_least_30_cases():
+    assert len(CASES) >= 30 and {cli for cli, _ in CASES} == set(MAINS)
+
+
+@pytest.mark.parametrize("cli, argv", CASES, ids=[f"{c}: {a.split(' --out')[0]}" for c, a in CASES])
+def test_misuse_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, cli, argv):
+    _fixtures(tmp_path)
+    before = _snapshot(tmp_path)
+    try:
+        code = MAINS[cli](argv.format(tmp=tmp_path).split())
+    except SystemExit as exc:  # argparse's own errors
+        code = exc.code
+    out, err = capsys.readouterr()
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2, (out, err)
+    assert len(lines) == 1 and lines[0].startswith(cli) and "error" in lines[0], err
+    assert "Traceback" not in err + out
+    assert _snapshot(tmp_path) == before
+
+
+def _options(parser: argparse.ArgumentParser):
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, command in sub.choices.items():
+        yield name, command, [a for a in command._actions if a.option_strings and a.dest != "help"
+                              and not a.required and a.default is not argparse.SUPPRESS]
+
+
+@pytest.mark.parametrize("build", [crowdnav_parser, gpgraph_parser, crowdsim_parser])
+def test_help_shows_every_default(build):
+    for name, command, options in _options(build()):
+        # ArgumentDefaultsHelpFormatter appends "(default: ...)" to every option that has help text
+        assert issubclass(command.formatter_class, argparse.ArgumentDefaultsHelpFormatter), name
+        assert all(a.help and a.help.strip() for a in options), name
+        text = " ".join(command.format_help().split())  # undo line wrapping
+        for a in options:
+            assert f"{a.option_strings[-1]}" in text and "(default: " in text.split(a.option_strings[-1], 1)[1], \
+                (name, a.option_strings)
