@@ -48,6 +48,9 @@ def _windows(data: Path, split: str) -> list:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    _check_output_dir(args.out)
+    if args.resume and not (Path(args.out) / "last.pt").is_file():
+        raise ValueError(f"--resume: nothing to resume, {Path(args.out) / 'last.pt'} does not exist")
     model_cfg = GPGraphConfig.backbone_only(args.backbone) if args.no_groups else GPGraphConfig(
         backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight)
     cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
@@ -70,6 +73,8 @@ def format_table(result: dict) -> str:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    if args.json:
+        _check_output_file(args.json, ".json")
     model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping)
     windows = _windows(args.data, "test")
     cfg = EvalConfig(protocol=args.protocol, seed=args.seed, trials=args.trials, n_samples=args.samples,
@@ -79,9 +84,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     result["grouping"] = model.config.grouping
     print(format_table(result))
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         clean = {k: (None if isinstance(v, float) and v != v else v) for k, v in result.items()}  # NaN -> null
-        Path(args.json).write_text(json.dumps(clean, indent=2, allow_nan=False) + "\n")
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(args.json).with_name(f".{Path(args.json).name}.part")
+        tmp.write_text(json.dumps(clean, indent=2, allow_nan=False) + "\n")
+        tmp.replace(args.json)
     return 0
 
 
@@ -94,6 +101,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     if args.sample_level:
         model.config = replace(model.config, sample_level=args.sample_level)
     pred = GPGraphPredictor(model).predict(history, n_samples=args.samples, rng=np.random.default_rng(args.seed))
+    out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.part")
     with open(tmp, "wb") as fh:  # a file handle: numpy writes exactly here (a path would gain ".npz")
         np.savez(fh, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
@@ -102,19 +110,23 @@ def cmd_predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_output_dir(path: Path) -> None:
+    """ValueError unless `path` is, or can be created as, a folder (no file on the way); creates nothing."""
+    for p in (Path(path), *Path(path).parents):
+        if p.exists():
+            if not p.is_dir():
+                raise ValueError(f"output {path}: {p} is a file, not a folder")
+            return
+
+
 def _check_output_file(path: Path, suffix: str) -> Path:
-    """`path` if it names a writable file ending in `suffix` (its folder is created); ValueError otherwise."""
+    """`path` if it names a file ending in `suffix` that can be written; ValueError otherwise (creates nothing)."""
     path = Path(path)
     if path.suffix != suffix:
-        raise ValueError(f"--out {path}: the file name must end in {suffix}")
+        raise ValueError(f"output {path}: the file name must end in {suffix}")
     if path.is_dir():
-        raise ValueError(f"--out {path} is a folder; give a file name")
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise ValueError(f"--out {path}: {parent} is a file, not a folder")
-            break
-    path.parent.mkdir(parents=True, exist_ok=True)
+        raise ValueError(f"output {path} is a folder; give a file name")
+    _check_output_dir(path.parent)
     return path
 
 
