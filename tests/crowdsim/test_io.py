@@ -31,6 +31,20 @@ def test_same_seed_and_config_give_byte_identical_files(tmp_path):
     assert a["run.txt"] != c["run.txt"]
 
 
+def test_the_one_reader_reads_every_export_exactly(tmp_path):
+    """crowdsim writes (it may not import predictor); predictor.ethucy, the project's one reader, reads what it
+    wrote: the same rows, labels one per row, groups a partition of labelled pedestrians."""
+    from predictor.ethucy import read_labels, read_trajectories
+
+    paths = generate(EVENTFUL, RunSpec(duration_s=20.0, seed=3), tmp_path, name="run")
+    rows = read_trajectories(paths["trajectories"])
+    np.testing.assert_array_equal(rows, np.loadtxt(paths["trajectories"], delimiter="\t"))
+    labels = read_labels(paths["labels"])
+    np.testing.assert_array_equal(labels[:, :2], rows[:, :2])
+    members = [p for g in read_groups_file(paths["groups"]) for p in g]
+    assert set(members) <= set(rows[:, 1].astype(int))
+
+
 def test_eth_ucy_format_and_labels(tmp_path):
     paths = generate(EVENTFUL, RunSpec(duration_s=40.0, seed=3), tmp_path, name="run")
     lines = paths["trajectories"].read_text().splitlines()
