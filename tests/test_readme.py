@@ -90,3 +90,60 @@ def test_every_readme_command_line_is_a_valid_invocation():
     assert {c[0] for c in commands} == set(parsers) and len(commands) >= 15
     for argv in commands:
         parsers[argv[0]]().parse_args(argv[1:])  # SystemExit (exit 2) on any unknown or malformed option
+
+
+# Shortened only through documented options (README: "Every CLI example in it runs in a test with small sizes").
+SMALL = {"--duration": "6", "--pedestrians": "8", "--seeds-per-scenario": "3", "--episodes": "1", "--workers": "1",
+         "--epochs": "1", "--trials": "1", "--record": "0", "--time-limit": "4"}
+ADD = {("gpgraph", "train"): ["--max-windows", "16", "--quiet"], ("crowdnav", "benchmark"): ["--no-progress"],
+       ("crowdnav", "evaluate"): ["--no-progress"], ("crowdnav", "demo"): ["--episodes", "1", "--workers", "1",
+                                                                          "--no-progress"]}
+
+
+def _small(argv: list[str], shared: Path, tmp_path: Path) -> list[str] | None:
+    """The README command with small sizes, the shared data's real path, and a real recording for `rec.txt`;
+    None for what cannot run here (a Ray cluster address)."""
+    if "--address" in argv:
+        return None
+    out = []
+    for i, tok in enumerate(argv):
+        prev = argv[i - 1] if i else ""
+        if prev in SMALL:
+            tok = SMALL[prev]
+        tok = tok.replace("../shared", str(shared))
+        if tok in ("rec.txt", "groups.txt"):
+            tok = str(tmp_path / tok)
+        out.append(tok)
+    if argv[:2] == ["crowdnav", "benchmark"]:  # the smallest cell of the suite and the cheapest policies
+        out[out.index("--cells") + 1] = "corridor-low-visible"
+        out[out.index("--policy") + 1: out.index("--policy") + 5] = ["mpc-cv", "social-force"]
+    return out + ADD.get(tuple(argv[:2]), [])
+
+
+@pytest.mark.slow
+def test_every_readme_command_runs_with_small_sizes(tmp_path, monkeypatch, capsys):
+    from crowdsim.cli import main as crowdsim_main
+    from envs.cli import main as crowdnav_main
+    from predictor.cli import main as gpgraph_main
+
+    shared = Path(__file__).resolve().parents[1].parent / "shared"
+    hotel = shared / "datasets/eth_ucy/hotel/test/biwi_hotel.txt"
+    if not hotel.is_file():
+        pytest.skip("../shared/datasets is not here")
+    (tmp_path / "rec.txt").write_text(hotel.read_text())
+    (tmp_path / "groups.txt").write_text("")
+    monkeypatch.chdir(tmp_path)
+    np.save("out_hist.npy", np.cumsum(np.full((8, 3, 2), 0.4), axis=0))
+    Path("out").mkdir()
+    Path("out_hist.npy").rename("out/hist.npy")
+    mains = {"crowdsim": crowdsim_main, "gpgraph": gpgraph_main, "crowdnav": crowdnav_main}
+    ran = 0
+    for argv in cli_commands():
+        small = _small(argv, shared, tmp_path)
+        if small is None:
+            continue
+        if small[:2] == ["gpgraph", "evaluate"] and small[3] == "runs/hotel/best.pt":
+            assert Path("runs/hotel/best.pt").is_file()  # made by the README's train line just before
+        assert mains[small[0]](small[1:]) == 0, (small, capsys.readouterr().err)
+        ran += 1
+    assert ran >= 13
