@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo demo-crowd test test-fast lint bench benchmark synthetic-predictor clean
+.PHONY: setup demo demo-crowd test test-fast lint bench soak benchmark synthetic-predictor clean
 
 setup: $(STAMP)
 
@@ -39,6 +39,11 @@ bench: setup
 	$(PY) bench/bench_crowdsim.py
 	$(PY) bench/bench_planner.py --quick
 	$(PY) bench/bench_env.py --quick
+	$(PY) bench/bench_shield.py --steps 100
+
+# Soak tests (BENCHMARKS.md "Soak"): 10^4 env steps per policy, 10^3 resets, a 30-minute 400-person crowd; ~15 min.
+soak: setup
+	$(PY) bench/soak.py
 
 # The planner benchmark behind RESULTS.md ("Planner benchmark"): suite crowdnav-v1 v2 (5 real ETH/UCY replays x 50
 # episodes, 20 synthetic cells x 10), mpc-gpgraph, mpc-cv, mpc-none and social-force, 2 workers. Resumable: rerun
