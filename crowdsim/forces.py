@@ -133,3 +133,19 @@ def cap_speed(vel: np.ndarray, max_speed: np.ndarray) -> np.ndarray:
     speed = np.sqrt(np.einsum("nk,nk->n", vel, vel))
     scale = np.where(speed > max_speed, max_speed / np.maximum(speed, _EPS), 1.0)
     return vel * scale[:, None]
+
+
+def crossed_walls(start: np.ndarray, end: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether the move start -> end (n, 2) m crosses any wall segment (S, 2, 2) m, i.e. the two
+    segments properly intersect (a move that only touches a wall or runs along it does not count)."""
+    if len(start) == 0 or len(segments) == 0:
+        return np.zeros(len(start), bool)
+    a, b = segments[None, :, 0], segments[None, :, 1]  # (1, S, 2)
+    p, q = start[:, None], end[:, None]  # (n, 1, 2)
+
+    def cross(o: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return (u[..., 0] - o[..., 0]) * (v[..., 1] - o[..., 1]) - (u[..., 1] - o[..., 1]) * (v[..., 0] - o[..., 0])
+
+    d1, d2 = cross(a, b, p), cross(a, b, q)  # sides of the wall line the move starts and ends on
+    d3, d4 = cross(p, q, a), cross(p, q, b)  # sides of the move line the wall's ends are on
+    return ((d1 * d2 < 0) & (d3 * d4 < 0)).any(axis=1)

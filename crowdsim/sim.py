@@ -119,7 +119,9 @@ class CrowdSimulator:
             offsets = rotate_to(local - local.mean(axis=0), direction)
             radius = self._radii(size)
             pos = origin + offsets
-            if placement_ok(pos, radius, *self._occupied(act), self.scenario.walls):
+            # every member on the origin's side of the walls (a disc beyond a wall also "clears" it)
+            inside = not forces.crossed_walls(np.repeat(origin[None], size, axis=0), pos, self.scenario.walls).any()
+            if inside and placement_ok(pos, radius, *self._occupied(act), self.scenario.walls):
                 lateral = rotate_to(local * np.array([0.0, 1.0]), direction)
                 self._add_group(pos, target + lateral, radius)
                 return True
