@@ -102,9 +102,13 @@ ADD = {("gpgraph", "train"): ["--max-windows", "16", "--quiet"], ("crowdnav", "b
 
 def _small(argv: list[str], shared: Path, tmp_path: Path) -> list[str] | None:
     """The README command with small sizes, the shared data's real path, and a real recording for `rec.txt`;
-    None for what cannot run here (a Ray cluster address)."""
+    None for what cannot run here (a Ray cluster address). `--backend ray` runs on the default local pool here
+    (Ray itself is tested in tests/envs/test_benchmark.py and tests/crowdsim/test_distributed.py)."""
     if "--address" in argv:
         return None
+    if "--backend" in argv:
+        k = argv.index("--backend")
+        argv = argv[:k] + argv[k + 2:]
     out = []
     for i, tok in enumerate(argv):
         prev = argv[i - 1] if i else ""

@@ -27,7 +27,7 @@ def test_dense_grouped_corridor_keeps_everyone_between_its_walls():
         state = sim.reset(seed=seed)
         for _ in range(150):
             y = state.pos[state.active, 1]
-            assert np.all((y > 0.0) & (y < width)), f"seed {seed}, frame {state.frame}: y = {y[(y <= 0) | (y >= width)]}"
+            assert np.all((y > 0.0) & (y < width)), (seed, state.frame, y[(y <= 0) | (y >= width)])
             state = sim.step()
 
 

@@ -149,6 +149,7 @@ def test_cli_benchmark_misuse_is_one_line(tmp_path, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("crowdsim-parallel")  # one xdist worker for every test that starts Ray or a pool
 def test_ray_backend_gives_the_same_records_as_the_process_pool(tmp_path):
     ray = pytest.importorskip("ray")
     suite = parse_suite(TINY)
