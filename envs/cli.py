@@ -16,8 +16,9 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
+from crowdsim.cli import OneLineParser, show_defaults  # the CLI conventions, shared with crowdsim
 from envs.cli_options import add_backend_options, add_policy_options, check_backend, default_workers, policy_configs
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 
@@ -38,31 +39,8 @@ def scenario_names() -> list[str]:
     return [*sorted(SCENARIOS), REPLAY_SCENARIO]
 
 
-class OneLineParser(argparse.ArgumentParser):
-    """Argument errors as one line on stderr (`prog command: error: ...`, exit 2), without the usage block
-    (`--help` still shows it). Options must be spelt out in full: no abbreviations."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        kwargs.setdefault("allow_abbrev", False)
-        super().__init__(*args, **kwargs)
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message}\n")
-
-
-def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Make `--help` print every option's default: options without help text get their name as help, which
-    `ArgumentDefaultsHelpFormatter` completes with "(default: ...)". Returns the parser."""
-    parser.formatter_class = argparse.ArgumentDefaultsHelpFormatter
-    for action in parser._actions:
-        if action.option_strings and action.help is None and action.default is not argparse.SUPPRESS:
-            action.help = action.dest.replace("_", " ")
-    return parser
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(prog="crowdnav", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = OneLineParser(prog="crowdnav", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
     e = sub.add_parser("evaluate", help="run policies over fixed episode seeds and report the metrics",

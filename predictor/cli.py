@@ -151,7 +151,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--grouping", default=None, choices=["exact", "official", "ratio"])
 
 
-class OneLineParser(argparse.ArgumentParser):
+class OneLineParser(argparse.ArgumentParser):  # the same conventions as crowdsim.cli (no cross-package import)
     """Argument errors as one line on stderr (`prog command: error: ...`, exit 2), without the usage block
     (`--help` still shows it). Options must be spelt out in full: no abbreviations."""
 
