@@ -58,6 +58,12 @@ def cmd_train(args: argparse.Namespace) -> int:
                       seed=args.seed, model=model_cfg)
     train_w = _windows(args.data, "train")[: args.max_windows or None]
     val_w = _windows(args.data, "val")[: args.max_windows or None]
+    labelled = sum(w.group_id is not None for w in train_w)
+    print(f"{len(train_w)} training / {len(val_w)} validation windows; group labels in {labelled} of the "
+          "training windows", flush=True)
+    if args.bce_weight > 0 and labelled == 0:
+        raise ValueError(f"--bce-weight {args.bce_weight} needs group labels (X.groups.txt or X.labels.tsv beside "
+                         f"the trajectory files), and {split_folder(args.data, 'train')} has none")
     summary = train(cfg, train_w, val_w, args.out, resume=args.resume, progress=not args.quiet)
     print(f"best validation loss {summary['best_val']:.4f}; {summary['seconds']:.1f} s; "
           f"checkpoint {Path(args.out) / 'best.pt'}")

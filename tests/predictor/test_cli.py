@@ -151,3 +151,17 @@ def test_train_rejects_a_scene_with_one_pedestrian(tmp_path: Path, capsys) -> No
         (tmp_path / split / "solo.txt").write_text("".join(f"{10 * f}\t1\t{0.1 * f}\t0.0\n" for f in range(30)))
     assert _train(tmp_path, tmp_path / "out", 1) == 2
     assert "no windows with >= 2 pedestrians" in capsys.readouterr().err
+
+
+def test_bce_weight_without_group_labels_is_an_error_and_train_reports_labels(synthetic_data: Path, tmp_path: Path,
+                                                                            capsys) -> None:
+    """GP-Graph+S's BCE term needs labels: on data without any it is refused, not silently dropped."""
+    for f in synthetic_data.rglob("*"):
+        if f.name.endswith((".groups.txt", ".labels.tsv")):
+            f.unlink()
+    assert _train(synthetic_data, tmp_path / "run", 1, "--bce-weight", "1.0") == 2
+    err = capsys.readouterr().err
+    assert "needs group labels" in err and err.count("\n") == 1
+    assert not (tmp_path / "run").exists()
+    assert _train(synthetic_data, tmp_path / "run", 1) == 0  # without the term it trains
+    assert "group labels in 0 of the training windows" in capsys.readouterr().out
