@@ -70,6 +70,8 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     """
     if not records:
         raise ValueError("no episodes to aggregate")
+    # a fixed order (cell, policy, seed): float sums must not depend on which worker finished first
+    records = sorted(records, key=lambda r: (str(r.cell), r.policy, r.seed))
     done = [r for r in records if r.outcome != "error"]
     n = len(done)
     count = {o: sum(r.outcome == o for r in done) for o in ("success", "collision", "timeout")}

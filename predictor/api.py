@@ -91,7 +91,12 @@ class GPGraphPredictor:
         mu, cov = (a[0].double().numpy() for a in mean_cov(out.raw))
         groups = out.groups[0].numpy().astype(np.int64)
         z = draw_latents(self.spec, n_samples, PRED_LEN, groups, rng)
-        samples = sample_positions(mu, cholesky_2x2(cov), z, h[-1])
+        with np.errstate(invalid="ignore", over="ignore"):
+            samples = sample_positions(mu, cholesky_2x2(cov), z, h[-1])
+        if not (np.all(np.isfinite(samples)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(cov))):
+            step = float(np.nanmax(np.linalg.norm(np.diff(h, axis=0), axis=-1))) if len(h) > 1 else 0.0
+            raise ValueError("the model's prediction is not finite for this history (largest observed step "
+                             f"{step:.3g} m per 0.4 s); histories must be in metres at 0.4 s steps, as trained")
         return Prediction(samples, h[-1] + np.cumsum(mu, axis=0), np.cumsum(cov, axis=0), groups)
 
 

@@ -116,6 +116,17 @@ def cmd_predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_list(args: argparse.Namespace) -> int:
+    """The packaged checkpoints, one name per line, then the model-free baseline."""
+    from predictor.api import CONSTANT_VELOCITY_NAMES
+    from predictor.checkpoint import PACKAGE_CHECKPOINTS
+
+    for path in sorted(PACKAGE_CHECKPOINTS.glob("*.safetensors")):
+        print(path.name[: -len(".safetensors")])
+    print(CONSTANT_VELOCITY_NAMES[0])
+    return 0
+
+
 def _check_output_dir(path: Path) -> None:
     """ValueError unless `path` is, or can be created as, a folder (no file on the way); creates nothing."""
     for p in (Path(path), *Path(path).parents):
@@ -221,6 +232,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
     r.set_defaults(func=cmd_predict)
+    ls = sub.add_parser("list", help="print the packaged predictor names (usable wherever a checkpoint is asked for)")
+    ls.set_defaults(func=cmd_list)
     for command in sub.choices.values():
         show_defaults(command)
     return parser
@@ -228,6 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.command == "list":
+        return cmd_list(args)
     if args.threads < 1:
         print("gpgraph: error: --threads must be >= 1", file=sys.stderr)
         return 2

@@ -114,3 +114,20 @@ def test_paired_bootstrap_covers_the_mean():
     assert lo < mean < hi and math.isclose(mean, diff.mean())
     half = 1.96 * diff.std(ddof=1) / math.sqrt(diff.size)
     assert hi - lo == pytest.approx(2 * half, rel=0.15)
+
+
+def test_aggregate_does_not_depend_on_the_order_records_arrive_in():
+    """Workers finish in any order (process pool, Ray); the summary must be bit-identical either way."""
+    import random
+
+    from envs.records import EpisodeRecord
+    from envs.stats import aggregate
+
+    rng = np.random.default_rng(0)
+    recs = [EpisodeRecord(policy="p", seed=s, outcome="success", cell="c", ret=float(rng.normal()) * 1e3 + 0.1,
+                          discomfort_frequency=float(rng.uniform()) / 3.0, path_length_m=float(rng.uniform(5, 20)),
+                          time_to_goal_s=float(rng.uniform(5, 20)), min_distance_m=float(rng.uniform()))
+            for s in range(40)]
+    shuffled = recs[:]
+    random.Random(1).shuffle(shuffled)
+    assert aggregate(shuffled) == aggregate(recs)

@@ -203,3 +203,12 @@ def test_packaged_eth_ucy_checkpoints_match_their_names() -> None:
         assert model.config.backbone == backbone, name
         assert model.config.uses_groups == bool(grouped), name
         assert meta["train"]["seed"] == 0 and meta["epoch"] < meta["train"]["epochs"], name
+
+
+def test_a_history_far_outside_the_training_scale_is_an_error_not_silent_nan() -> None:
+    """Centimetres instead of metres (x100): the packaged model's output overflows; that must be an error."""
+    pred = load_predictor("gpgraph-sgcn-hotel")
+    h = _history(6)
+    assert np.isfinite(pred.predict(h, rng=0).samples).all()
+    with pytest.raises(ValueError, match=r"metres at 0\.4 s steps"):
+        pred.predict(h * 1000.0, rng=0)

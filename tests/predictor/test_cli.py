@@ -165,3 +165,14 @@ def test_bce_weight_without_group_labels_is_an_error_and_train_reports_labels(sy
     assert not (tmp_path / "run").exists()
     assert _train(synthetic_data, tmp_path / "run", 1) == 0  # without the term it trains
     assert "group labels in 0 of the training windows" in capsys.readouterr().out
+
+
+def test_list_prints_every_packaged_name_and_each_loads(capsys) -> None:
+    from predictor import load_predictor
+    from predictor.checkpoint import PACKAGE_CHECKPOINTS
+
+    assert main(["list"]) == 0
+    names = capsys.readouterr().out.split()
+    assert set(names) == {p.stem for p in PACKAGE_CHECKPOINTS.glob("*.safetensors")} | {"constant-velocity"}
+    assert "gpgraph-stgcnn-synthetic" in names
+    load_predictor(names[0]), load_predictor(names[-1])  # the listed names are what load_predictor takes
