@@ -38,8 +38,8 @@ def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig],
         "suite": suite.name, "version": suite.version, "description": suite.description,
         "policies": {p.name: p.to_json() for p in policies},
         "cells": {c.name: {"spec": c.spec, "seeds": [c.seeds[0], c.seeds[-1]], "results": {},
-                           "predictors": {p.name: p.for_cell(c.scene, c.predictor).predictor for p in policies
-                                          if p.for_cell(c.scene, c.predictor).predictor is not None}}
+                           "predictors": {p.name: pred for p in policies
+                                          if (pred := p.for_cell(c.scene, c.predictor).predictor) is not None}}
                   for c in cells},
         "pooled": {}, "paired": {},
     }

@@ -138,19 +138,20 @@ def group_capsules(pts: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.n
     return a, b, (across + radii).max(-1)
 
 
-def _point_segment_distance(p: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """p (2,), seg (W, 4) -> (W,) distance in m."""
+def point_segment_distances(p: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Points p (..., 2), segments seg (W, 4) x0, y0, x1, y1 -> distances (..., W) in m."""
     a, b = seg[:, :2], seg[:, 2:]
     ab = b - a
-    t = np.clip(((p - a) * ab).sum(1) / np.maximum((ab * ab).sum(1), 1e-12), 0.0, 1.0)
-    return np.linalg.norm(a + t[:, None] * ab - p, axis=1)
+    rel = np.asarray(p, float)[..., None, :] - a
+    t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    return np.linalg.norm(rel - t[..., None] * ab, axis=-1)
 
 
 def _nearest_walls(obstacles: np.ndarray | None, robot_xy: np.ndarray, w: int) -> tuple[np.ndarray, ...]:
     walls = np.tile(np.r_[robot_xy + FAR_M, robot_xy + FAR_M + 1.0], (w, 1))
     wall_mask = np.zeros(w)
     if obstacles is not None and len(obstacles) and w:
-        order = np.argsort(_point_segment_distance(robot_xy, obstacles), kind="stable")[:w]
+        order = np.argsort(point_segment_distances(robot_xy, obstacles), kind="stable")[:w]
         walls[: order.size] = obstacles[order]
         wall_mask[: order.size] = 1.0
     return walls, wall_mask
@@ -191,7 +192,7 @@ def _start_penetration(robot_xy, now, radii, real, obstacles, robot_radius: floa
     if real.size:
         depth = float(np.max(robot_radius + radii[real] - np.linalg.norm(now[real] - robot_xy, axis=1)))
     if obstacles is not None and len(obstacles):
-        depth = max(depth, float(np.max(robot_radius - _point_segment_distance(robot_xy, obstacles))))
+        depth = max(depth, float(np.max(robot_radius - point_segment_distances(robot_xy, obstacles))))
     return depth
 
 

@@ -32,7 +32,7 @@ import numpy as np
 from planner.config import MPCConfig, RobotConfig
 from planner.dynamics import clip_control, step_numpy
 from planner.prediction import PedPrediction, current_positions
-from planner.scene import resample_in_time
+from planner.scene import point_segment_distances, resample_in_time
 
 N_SPEEDS = 5  # candidate forward speeds (unicycle) / speed magnitudes (holonomic), rest excluded
 N_TURNS = 9  # candidate yaw rates (unicycle) / directions (holonomic: 2 * N_TURNS)
@@ -86,32 +86,26 @@ def wall_clearance(points: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
     """Distance (m) from each point (..., 2) to the nearest wall segment (W, 4); +inf without walls."""
     if walls is None or len(walls) == 0:
         return np.full(points.shape[:-1], np.inf)
-    a, b = walls[:, :2], walls[:, 2:]
-    ab = b - a
-    rel = points[..., None, :] - a
-    t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * ab, axis=-1).min(-1)
+    return point_segment_distances(points, walls).min(-1)
 
 
-def sample_futures(prediction: PedPrediction, dt_s: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """Real pedestrians' futures (K, n_steps, n, 2) at the shield's times and their radii (n,)."""
+def sample_futures(prediction: PedPrediction, dt_s: float, n_steps: int,
+                   with_cv: bool) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Real pedestrians' futures (K [+1], n_steps, n, 2) at the shield's times, their radii (n,), and whether
+    the last future is the constant-velocity one: the last observed velocity (last two history rows) held,
+    appended when `with_cv` and the prediction has a history of >= 2 rows."""
     real = np.asarray(prediction.mask, bool)
-    positions = np.asarray(prediction.positions, float)[:, :, real]
     now = current_positions(prediction)[real]
-    return resample_in_time(positions, now, prediction.step_s, dt_s, n_steps), np.asarray(prediction.radii)[real]
-
-
-def cv_future(prediction: PedPrediction, dt_s: float, n_steps: int) -> np.ndarray | None:
-    """Real pedestrians' constant-velocity future (1, n_steps, n, 2) from the last two history rows (the last
-    observed velocity), or None without a history of >= 2 rows."""
+    positions = np.asarray(prediction.positions, float)[:, :, real]
+    futures = resample_in_time(positions, now, prediction.step_s, dt_s, n_steps)
     hist = prediction.history
-    if hist is None or np.shape(hist)[0] < 2:
-        return None
-    real = np.asarray(prediction.mask, bool)
-    hist = np.asarray(hist, float)[:, real]
-    vel = (hist[-1] - hist[-2]) / prediction.step_s
-    times = dt_s * np.arange(1, n_steps + 1)
-    return (current_positions(prediction)[real][None] + times[:, None, None] * vel[None])[None]
+    has_cv = with_cv and hist is not None and np.shape(hist)[0] >= 2
+    if has_cv:
+        hist = np.asarray(hist, float)[:, real]
+        vel = (hist[-1] - hist[-2]) / prediction.step_s
+        times = dt_s * np.arange(1, n_steps + 1)
+        futures = np.concatenate([futures, (now[None] + times[:, None, None] * vel[None])[None]])
+    return futures, np.asarray(prediction.radii)[real], has_cv
 
 
 def within_reach(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, cfg: MPCConfig) -> np.ndarray:
@@ -149,16 +143,13 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     commands = np.repeat(cands[:, None], n_steps, axis=1)
     commands[0] = plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)
     robot_xy = rollout_candidates(state, commands, cfg.shield_dt_s, cfg.robot)
-    futures, radii = sample_futures(prediction, cfg.shield_dt_s, n_steps)
-    cv = cv_future(prediction, cfg.shield_dt_s, n_steps) if cfg.shield_cv else None
-    if cv is not None:  # the last observed velocity, held: a future every candidate must avoid
-        futures = np.concatenate([futures, cv])
+    futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, n_steps, cfg.shield_cv)
     near = within_reach(np.asarray(state, float)[:2], futures, radii, cfg)
     clear = clearances(robot_xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls)  # (C, K [+1], T)
     short = cfg.shield_margin_m - clear
     hit = (short > 0).any(-1)  # (C, K [+1])
-    risk = hit[:, : len(futures) - (cv is not None)].mean(-1)
-    if cv is not None:
+    risk = hit[:, : len(futures) - has_cv].mean(-1)
+    if has_cv:  # the constant-velocity future must be avoided outright
         risk = np.maximum(risk, hit[:, -1])  # (C,)
     if risk[0] <= cfg.shield_max_risk:
         return ShieldVerdict(cands[0].copy(), float(risk[0]), False, float(risk[0]))
