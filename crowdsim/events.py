@@ -1,56 +1,55 @@
 """Group events that make ground-truth labels time-varying: a member leaves, or two groups merge.
 
 Each group draws its events once per recording step from Poisson processes (rates in GroupConfig).
-The new labels take effect from the next recorded frame.
+The new labels take effect from the next recorded frame. The functions change the simulator's slots and
+take new labels from its group book; they never see the simulator itself.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from crowdsim.groups import group_speed
+from crowdsim.config import SimConfig
+from crowdsim.groups import GroupBook, formation_goals, group_speed
+from crowdsim.scenarios import Scenario
+from crowdsim.state import Slots
 
-if TYPE_CHECKING:
-    from crowdsim.sim import CrowdSimulator
 
-
-def apply_events(sim: CrowdSimulator) -> None:
+def apply_events(slots: Slots, book: GroupBook, rng: np.random.Generator, config: SimConfig,
+                 scenario: Scenario) -> None:
     """Draw and apply leave and merge events for the current step (no-op when both rates are 0)."""
-    cfg = sim.config.groups
+    cfg = config.groups
     if cfg.leave_rate_hz <= 0 and cfg.merge_rate_hz <= 0:
         return
-    dt = sim.config.record_dt_s
-    labels = np.unique(sim.slots.label[sim.slots.active])
+    dt = config.record_dt_s
     p_leave = 1.0 - np.exp(-cfg.leave_rate_hz * dt)
     p_merge = 1.0 - np.exp(-cfg.merge_rate_hz * dt)
-    for label in labels:
-        u_leave, u_merge = sim.rng.random(2)
-        members = np.flatnonzero(sim.slots.active & (sim.slots.label == label))
+    for label in np.unique(slots.label[slots.active]):
+        u_leave, u_merge = rng.random(2)
+        members = np.flatnonzero(slots.active & (slots.label == label))
         if len(members) == 0:
             continue
         if len(members) >= 2 and u_leave < p_leave:
-            leave(sim, int(sim.rng.choice(members)))
+            leave(slots, book, rng, config, scenario, int(rng.choice(members)))
         elif u_merge < p_merge:
-            merge_nearest(sim, int(label))
+            merge_nearest(slots, config, int(label))
 
 
-def leave(sim: CrowdSimulator, slot: int) -> None:
+def leave(slots: Slots, book: GroupBook, rng: np.random.Generator, config: SimConfig, scenario: Scenario,
+          slot: int) -> None:
     """Pedestrian in `slot` leaves its group: a new singleton label, its own speed and destination."""
-    s = sim.slots
-    s.label[slot] = sim._new_label()
-    s.speed[slot] = group_speed(sim.rng, 1, sim.config.social, sim.config.groups)
-    s.goal[slot] = sim.scenario.new_destination(sim.rng, s.pos[slot])
+    slots.label[slot] = book.new_label()
+    slots.speed[slot] = group_speed(rng, 1, config.social, config.groups)
+    slots.goal[slot] = scenario.new_destination(rng, slots.pos[slot])
 
 
-def merge_nearest(sim: CrowdSimulator, label: int) -> bool:
+def merge_nearest(slots: Slots, config: SimConfig, label: int) -> bool:
     """Group `label` absorbs the nearest group walking the same way within merge_distance_m.
 
     The absorbed members take the label, destination and speed of `label`. Returns whether a merge
     happened.
     """
-    s = sim.slots
+    s, cfg = slots, config.groups
     act = np.flatnonzero(s.active)
     mine = act[s.label[act] == label]
     others = act[s.label[act] != label]
@@ -58,10 +57,10 @@ def merge_nearest(sim: CrowdSimulator, label: int) -> bool:
         return False
     centre = s.pos[mine].mean(axis=0)
     heading = s.goal[mine].mean(axis=0) - centre
-    best, best_d = -1, sim.config.groups.merge_distance_m
+    best, best_d = -1, cfg.merge_distance_m
     for other in np.unique(s.label[others]):
         members = others[s.label[others] == other]
-        if len(members) + len(mine) > 2 * sim.config.groups.max_size:
+        if len(members) + len(mine) > 2 * cfg.max_size:
             continue
         c = s.pos[members].mean(axis=0)
         d = float(np.linalg.norm(c - centre))
@@ -75,5 +74,6 @@ def merge_nearest(sim: CrowdSimulator, label: int) -> bool:
     s.label[absorbed] = label
     s.speed[absorbed] = s.speed[mine[0]]
     destination = s.goal[mine].mean(axis=0)
-    sim.retarget_group(label, destination)
+    members = np.flatnonzero(s.active & (s.label == label))
+    s.goal[members] = formation_goals(s.pos[members], destination, cfg.formation_spacing_m)
     return True

@@ -5,6 +5,8 @@ Formations are given in a local frame (x forward along the walking direction, y 
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from crowdsim.config import GroupConfig, SocialForceParams
@@ -27,6 +29,19 @@ def draw_group_size(rng: np.random.Generator, cfg: GroupConfig, limit: int) -> i
     """One group size from cfg's distribution, at most `limit`."""
     probs = np.asarray(cfg.size_probabilities())
     return min(int(rng.choice(len(probs), p=probs)) + 1, limit)
+
+
+def draw_inflow_size(rng: np.random.Generator, cfg: GroupConfig, mean_stay_s: np.ndarray, limit: int) -> int:
+    """The size of the next group to enter a continuous scene, at most `limit`.
+
+    By Little's law the people in a scene in groups of size k number (arrival rate of such groups) x k x
+    (their mean stay), and larger groups stay longer (they walk slower). Arrivals drawn from cfg's distribution
+    p alone would therefore over-represent large groups in the scene; drawing size k with probability
+    proportional to p_k / mean_stay_s[k - 1] keeps the people in the scene at the composition p implies.
+    mean_stay_s: (max_size,) seconds, the mean stay of groups of each size so far (`GroupBook.mean_stay_s`).
+    """
+    probs = np.asarray(cfg.size_probabilities())[:limit] / np.asarray(mean_stay_s, dtype=float)[:limit]
+    return int(rng.choice(len(probs), p=probs / probs.sum())) + 1
 
 
 def group_speed(rng: np.random.Generator, size: int, social: SocialForceParams, cfg: GroupConfig) -> float:
@@ -54,6 +69,64 @@ def rotate_to(offsets: np.ndarray, direction: np.ndarray) -> np.ndarray:
     c, s = (direction / norm) if norm > 1e-9 else (1.0, 0.0)
     rot = np.array([[c, -s], [s, c]])
     return offsets @ rot.T
+
+
+def formation_goals(positions: np.ndarray, destination: np.ndarray, spacing_m: float) -> np.ndarray:
+    """(n, 2) goals for a group at positions (n, 2) heading to destination (2,): the destination plus each
+    member's lateral offset of the abreast formation, assigned so that members keep the side of the walking
+    line they already walk on (both orderings matched across the line)."""
+    centre = positions.mean(axis=0)
+    direction = destination - centre
+    local = formation_offsets(len(positions), spacing_m)
+    lateral = rotate_to(local * np.array([0.0, 1.0]), direction)
+    perp = np.array([-direction[1], direction[0]])
+    goals = np.empty_like(positions)
+    goals[np.argsort((positions - centre) @ perp, kind="stable")] = (
+        destination + lateral[np.argsort(lateral @ perp, kind="stable")])
+    return goals
+
+
+@dataclass
+class GroupBook:
+    """The simulator's record of its groups: the next unused label (labels are never reused), the size of
+    the group drawn for inflow that waits until the scene has room for all of it (0: none drawn), and how long
+    groups of each size stayed in the scene (entry time and size of each group present; summed stays, s).
+
+    Events and behaviours take labels from here; only the simulator owns a book.
+    """
+
+    max_size: int
+    next_label: int = 0
+    pending_size: int = 0
+    entered: dict[int, tuple[float, int]] = field(default_factory=dict)
+    stay_sum_s: np.ndarray = field(init=False)
+    stay_count: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.stay_sum_s = np.zeros(self.max_size)
+        self.stay_count = np.zeros(self.max_size)
+
+    def new_label(self) -> int:
+        self.next_label += 1
+        return self.next_label - 1
+
+    def enter(self, label: int, size: int, time_s: float) -> None:
+        self.entered[label] = (time_s, size)
+
+    def left(self, label: int, time_s: float) -> None:
+        """The last member of group `label` left the scene: record its stay."""
+        since, size = self.entered.pop(label, (None, 0))
+        if since is not None:
+            self.stay_sum_s[size - 1] += time_s - since
+            self.stay_count[size - 1] += 1
+
+    def mean_stay_s(self) -> np.ndarray:
+        """(max_size,) mean stay of groups of each size, s: each size's observed mean, shrunk towards the
+        mean over all sizes with the weight of 3 groups (all ones before any group has left)."""
+        if self.stay_count.sum() == 0:
+            return np.ones(self.max_size)
+        overall = self.stay_sum_s.sum() / self.stay_count.sum()
+        return (self.stay_sum_s + 3.0 * overall) / (self.stay_count + 3.0)
 
 
 def placement_ok(candidates: np.ndarray, cand_radius: np.ndarray, others: np.ndarray,

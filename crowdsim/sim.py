@@ -15,8 +15,10 @@ from crowdsim import forces, kernels
 from crowdsim.config import SimConfig
 from crowdsim.events import apply_events
 from crowdsim.groups import (
-    draw_group_size,
+    GroupBook,
     draw_group_sizes,
+    draw_inflow_size,
+    formation_goals,
     formation_offsets,
     group_speed,
     hex_lattice,
@@ -54,7 +56,7 @@ class CrowdSimulator:
         self.frame = 0
         self.time_s = 0.0
         self._next_ped_id = 1
-        self._next_label = 0
+        self.book = GroupBook(self.config.groups.max_size)
         self.n_spawned = 0
         self.n_exited = 0
         self._index_cache: tuple[np.ndarray, np.ndarray] | None = None
@@ -140,7 +142,8 @@ class CrowdSimulator:
         free = np.flatnonzero(~self.slots.active)
         if len(free) < size:
             raise RuntimeError("no free pedestrian slots")
-        label = self._new_label()
+        label = self.book.new_label()
+        self.book.enter(label, size, self.time_s)
         speed = group_speed(self.rng, size, self.config.social, self.config.groups)
         for k, slot in enumerate(free[:size]):
             self.slots.activate(slot, self._next_ped_id, label, pos[k], goals[k], radius[k], speed)
@@ -148,10 +151,6 @@ class CrowdSimulator:
             self._next_ped_id += 1
         self._index_cache = None
         self.n_spawned += size
-
-    def _new_label(self) -> int:
-        self._next_label += 1
-        return self._next_label - 1
 
     # ------------------------------------------------------------------------------------------ robot
     def set_robot(self, pos: np.ndarray, vel: np.ndarray, radius_m: float | None = None) -> None:
@@ -180,7 +179,7 @@ class CrowdSimulator:
         self.world.read(self.slots.pos, self.slots.vel)
         self._wrap_periodic()
         self._arrivals()
-        apply_events(self)
+        apply_events(self.slots, self.book, self.rng, self.config, self.scenario)
         if self.scenario.continuous:
             self._inflow()
         self._index_cache = None
@@ -197,8 +196,6 @@ class CrowdSimulator:
         s, cfg = self.slots, self.config
         idx, labels = self._active_index()
         pos, vel = s.pos[idx], s.vel[idx]
-        if self.scenario.periodic_x is not None:
-            s.goal[idx, 0] = pos[:, 0] + 5.0
         if reference:
             v_des = forces.desired_velocity(pos, s.goal[idx], s.speed[idx], cfg.social)
             e = forces.headings(vel, v_des)
@@ -250,6 +247,7 @@ class CrowdSimulator:
         self.world.read(s.pos, s.vel)
         if not s.active.any():
             return
+        self._ring_goals()
         acc, idx = self.accelerations()
         if cfg.social.fluctuation_mps2 > 0:
             acc += self.rng.normal(0.0, cfg.social.fluctuation_mps2, acc.shape)
@@ -261,6 +259,12 @@ class CrowdSimulator:
             if k:
                 self.world.repeat_force()
             self.world.step(cfg.physics_dt_s)
+
+    def _ring_goals(self) -> None:
+        """On a periodic ring every goal stays 5 m ahead of its pedestrian, so nobody ever arrives."""
+        if self.scenario.periodic_x is not None:
+            act = self.slots.active
+            self.slots.goal[act, 0] = self.slots.pos[act, 0] + 5.0
 
     def _wrap_periodic(self) -> None:
         if self.scenario.periodic_x is None:
@@ -275,10 +279,16 @@ class CrowdSimulator:
         idx = np.flatnonzero(s.active)
         dist = np.linalg.norm(s.pos[idx] - s.goal[idx], axis=1)
         if scen.on_arrival == "remove":
-            for slot in idx[dist < scen.exit_radius_m]:
+            # a group leaves together: with one member out, those within 2 m of their own exit follow at once
+            # (a remnant would otherwise count as a smaller group for a second or two)
+            gone = np.isin(s.label[idx], s.label[idx[dist < scen.exit_radius_m]]) & (dist < scen.exit_radius_m + 2.0)
+            for slot in idx[(dist < scen.exit_radius_m) | gone]:
+                label = int(s.label[slot])
                 self.world.remove(int(slot))
                 s.deactivate(slot)
                 self.n_exited += 1
+                if not np.any(s.active & (s.label == label)):
+                    self.book.left(label, self.time_s)
         elif scen.on_arrival == "new_goal":
             for label in np.unique(s.label[idx[dist < scen.exit_radius_m]]):
                 self.retarget_group(int(label))
@@ -287,22 +297,26 @@ class CrowdSimulator:
         """Give every member of group `label` a new shared destination (in formation)."""
         s = self.slots
         members = np.flatnonzero(s.active & (s.label == label))
-        centre = s.pos[members].mean(axis=0)
         if destination is None:
-            destination = self.scenario.new_destination(self.rng, centre)
-        local = formation_offsets(len(members), self.config.groups.formation_spacing_m)
-        lateral = rotate_to(local * np.array([0.0, 1.0]), destination - centre)
-        # Keep members on the side they already walk on: match both orderings across the walking line.
-        perp = np.array([-(destination - centre)[1], (destination - centre)[0]])
-        by_side = members[np.argsort((s.pos[members] - centre) @ perp, kind="stable")]
-        s.goal[by_side] = destination + lateral[np.argsort(lateral @ perp, kind="stable")]
+            destination = self.scenario.new_destination(self.rng, s.pos[members].mean(axis=0))
+        s.goal[members] = formation_goals(s.pos[members], destination, self.config.groups.formation_spacing_m)
 
     def _inflow(self) -> None:
-        free = int((~self.slots.active).sum())
-        if free == 0:
+        """Keep the crowd size with whole groups drawn from the configured size distribution.
+
+        The next group's size is drawn once (`draw_inflow_size`: the configured distribution, corrected for
+        how long each size stays, so that the people in the scene keep the composition it implies), and the
+        group waits, however many steps it takes, until the scene has free slots for all of it and a clear
+        spot at an entrance. Filling the gaps with whatever fits would bias arrivals towards singles (people
+        leave one by one), and the share in groups would decay.
+        """
+        if self.book.pending_size == 0:
+            self.book.pending_size = draw_inflow_size(self.rng, self.config.groups, self.book.mean_stay_s(),
+                                                      self.config.n_pedestrians)
+        if int((~self.slots.active).sum()) < self.book.pending_size:
             return
-        size = draw_group_size(self.rng, self.config.groups, free)
-        self._try_spawn_group(size, 0.0, tries=3)
+        if self._try_spawn_group(self.book.pending_size, 0.0, tries=3):
+            self.book.pending_size = 0
 
     # ------------------------------------------------------------------------------------------ state
     def state(self) -> CrowdState:

@@ -13,8 +13,10 @@ class CrowdState:
     (positions NaN, ids -1).
 
     pos (C, 2) m, vel (C, 2) m/s, goal (C, 2) m, radius (C,) m, group_id (C,) int dense 0..G-1 over the
-    active rows, ped_id (C,) int stable over a run and never reused, active (C,) bool; frame is the
-    recording step index and time_s = frame * record_dt_s.
+    active rows, ped_id (C,) int stable over a run and never reused, active (C,) bool; label (C,) int the
+    stable group label (the same group keeps it for its lifetime and no other group ever gets it; -1 on
+    inactive rows), which the exporters write; frame is the recording step index and time_s = frame *
+    record_dt_s.
     """
 
     pos: np.ndarray
@@ -24,6 +26,7 @@ class CrowdState:
     group_id: np.ndarray
     ped_id: np.ndarray
     active: np.ndarray
+    label: np.ndarray
     frame: int
     time_s: float
 
@@ -82,5 +85,5 @@ class Slots:
         return CrowdState(
             pos=self.pos * nan2, vel=self.vel * nan2, goal=self.goal * nan2,
             radius=np.where(act, self.radius, np.nan), group_id=group, ped_id=self.ped_id.copy(),
-            active=act, frame=frame, time_s=time_s,
+            active=act, label=np.where(act, self.label, -1), frame=frame, time_s=time_s,
         )

@@ -308,8 +308,9 @@ class ReplayCrowd:
         pos, vel, goal = (np.full((c, 2), np.nan) for _ in range(3))
         pos[rows], vel[rows], goal[rows] = pos_a, vel_a, self._goal[idx]
         radius = np.where(active, self.config.ped_radius_m, np.nan)
-        group, ped = np.full(c, -1, np.int64), np.full(c, -1, np.int64)
+        group, ped, label = np.full(c, -1, np.int64), np.full(c, -1, np.int64), np.full(c, -1, np.int64)
         group[rows] = np.unique(self._label[idx], return_inverse=True)[1]
+        label[rows] = self._label[idx]
         ped[rows] = self.ped_ids[idx]
         return CrowdState(pos=pos, vel=vel, goal=goal, radius=radius, group_id=group, ped_id=ped,
-                          active=active, frame=self._step, time_s=self._step * self.dt_s)
+                          active=active, label=label, frame=self._step, time_s=self._step * self.dt_s)
