@@ -138,6 +138,50 @@ class GroupConfig:
 
 
 @dataclass(frozen=True)
+class BehaviourConfig:
+    """What people do besides walking in formation (`crowdsim.behaviours`). Rates are per group (or per
+    member) in 1/s, drawn once per recording step; a rate of 0 turns a behaviour off.
+
+    - Variation inside a group: each member's desired speed is the group's plus N(0, member_speed_std_mps),
+      and each lateral spacing of the walking formation is scaled by 1 + N(0, member_spacing_std).
+    - Stops: a walking group stops (`stop_rate_hz`) in one of the scenario's stop areas or at one of its points
+      of interest (a shop window, a notice board: `poi_share` of the stops), stands in an F-formation, members
+      on a circle around a shared o-space, neighbours `fformation_spacing_m` apart, centre to centre (Kendon
+      1990; the spacing lies in Hall's personal-distance range 0.45–1.2 m), for an exponential time with mean
+      `stop_mean_s` (at least `stop_min_s`), then walks on to where it was going. Stationary groups are a large
+      part of real crowds (Yi, Li & Wang, CVPR 2015, stationary crowd groups in a station concourse).
+    - Meeting and parting at a stop: a single walking within `join_distance_m` of a standing group's centre
+      joins it (`join_rate_hz` per standing group; it takes the group's label, place and destination), and a
+      member of a standing group of 2+ leaves on its own (`part_rate_hz` per member; a new label).
+    - Strangers who walk close: an arriving single enters, with probability `stranger_companion_prob`, right
+      beside or behind the group that entered last from the same entrance, heading for the same exit at a
+      similar speed, so that distance alone does not reveal who is together.
+    """
+
+    member_speed_std_mps: float = 0.05
+    member_spacing_std: float = 0.1
+    stop_rate_hz: float = 0.0
+    poi_share: float = 0.5
+    stop_mean_s: float = 40.0
+    stop_min_s: float = 8.0
+    fformation_spacing_m: float = 0.9
+    join_rate_hz: float = 0.0
+    join_distance_m: float = 3.0
+    part_rate_hz: float = 0.0
+    stranger_companion_prob: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("member_speed_std_mps", "member_spacing_std", "stop_rate_hz", "join_rate_hz",
+                     "part_rate_hz", "stop_min_s"):
+            _non_negative(name, getattr(self, name))
+        for name in ("stop_mean_s", "fformation_spacing_m", "join_distance_m"):
+            _positive(name, getattr(self, name))
+        _in_range("poi_share", self.poi_share, 0.0, 1.0)
+        _in_range("stranger_companion_prob", self.stranger_companion_prob, 0.0, 1.0)
+        _in_range("member_spacing_std", self.member_spacing_std, 0.0, 0.5)
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     """The external agent slot. `visible` makes pedestrians repel from the robot like from a person."""
 
@@ -168,6 +212,7 @@ class SimConfig:
     social: SocialForceParams = field(default_factory=SocialForceParams)
     group_forces: GroupForceParams = field(default_factory=GroupForceParams)
     groups: GroupConfig = field(default_factory=GroupConfig)
+    behaviour: BehaviourConfig = field(default_factory=BehaviourConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     scenario_options: tuple[tuple[str, float], ...] = ()  # scenario-specific overrides (name, value)
 

@@ -26,6 +26,8 @@ def apply_events(slots: Slots, book: GroupBook, rng: np.random.Generator, config
     p_merge = 1.0 - np.exp(-cfg.merge_rate_hz * dt)
     for label in np.unique(slots.label[slots.active]):
         u_leave, u_merge = rng.random(2)
+        if int(label) in book.stops:  # stopping and standing groups meet and part in crowdsim.behaviours
+            continue
         members = np.flatnonzero(slots.active & (slots.label == label))
         if len(members) == 0:
             continue

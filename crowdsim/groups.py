@@ -6,6 +6,7 @@ Formations are given in a local frame (x forward along the walking direction, y 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -90,7 +91,8 @@ def formation_goals(positions: np.ndarray, destination: np.ndarray, spacing_m: f
 class GroupBook:
     """The simulator's record of its groups: the next unused label (labels are never reused), the size of
     the group drawn for inflow that waits until the scene has room for all of it (0: none drawn), and how long
-    groups of each size stayed in the scene (entry time and size of each group present; summed stays, s).
+    groups of each size stayed in the scene (entry time and size of each group present; summed stays, s), and
+    the stops of the groups that are stopping or standing (`crowdsim.behaviours`).
 
     Events and behaviours take labels from here; only the simulator owns a book.
     """
@@ -99,6 +101,8 @@ class GroupBook:
     next_label: int = 0
     pending_size: int = 0
     entered: dict[int, tuple[float, int]] = field(default_factory=dict)
+    stops: dict[int, Any] = field(default_factory=dict)  # label -> behaviours.Stop of a stopping group
+    last_spawned: int = -1  # label of the group that entered last
     stay_sum_s: np.ndarray = field(init=False)
     stay_count: np.ndarray = field(init=False)
 

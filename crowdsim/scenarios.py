@@ -29,7 +29,8 @@ class Scenario:
     walls: (S, 2, 2) segments in metres. flows: origin/destination rectangles. on_arrival: "remove"
     (leave the scene), "stop" (stand at the goal) or "new_goal" (draw a new destination). continuous:
     keep the crowd size by spawning new groups as others leave. periodic_x: (x0, x1) wraps a pedestrian
-    who passes x1 back to x0 (used to hold a corridor at a fixed density).
+    who passes x1 back to x0 (used to hold a corridor at a fixed density). stop_areas and pois: where groups
+    that stop (`crowdsim.behaviours`) stand; none means nobody stops in this scene.
     """
 
     name: str
@@ -42,6 +43,8 @@ class Scenario:
     exit_radius_m: float = 1.0
     dense_spawn: Rect | None = None  # initial crowd placed on a lattice here instead of by flows
     interior: Rect | None = None  # initial groups start anywhere in here (instead of along their flow)
+    stop_areas: tuple[Rect, ...] = ()  # where a group may stop and stand (BehaviourConfig stops)
+    pois: tuple[tuple[float, float], ...] = ()  # points of interest (x, y) m that people stop at
     options: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -54,6 +57,8 @@ class Scenario:
         for k, flow in enumerate(self.flows):
             for what, rect in (("spawn", flow.spawn), ("target", flow.target)):
                 _check_rect(self.name, f"flow {k} {what}", rect, walls)
+        for k, rect in enumerate(self.stop_areas):
+            _check_rect(self.name, f"stop area {k}", rect, walls)
 
     def draw_flow(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """A group's origin (2,) and destination (2,), metres."""
@@ -123,8 +128,10 @@ def corridor(opt: Mapping[str, float]) -> Scenario:
         return Scenario("corridor", np.array(walls), (-2.0, 0.0, length + 2.0, width),
                         (Flow((0.0, m, length, width - m), (length + 1.0, m, length + 1.5, width - m)),),
                         continuous=False, periodic_x=(0.0, length), dense_spawn=dense, options=dict(opt))
+    # people stop along the walls (not in the entrance zones), leaving the middle of a 4 m corridor free
+    bands = ((3.0, 0.85, length - 3.0, 1.0), (3.0, width - 1.0, length - 3.0, width - 0.85)) if width >= 3.5 else ()
     return Scenario("corridor", np.array(walls), (-2.0, 0.0, length + 2.0, width), (right, left),
-                    options=dict(opt))
+                    stop_areas=bands, options=dict(opt))
 
 
 def crossing(opt: Mapping[str, float]) -> Scenario:
@@ -139,7 +146,13 @@ def crossing(opt: Mapping[str, float]) -> Scenario:
     m = 0.4
     east = Flow((-half, -w + m, -half + 2.0, w - m), (half + 1.0, -w + m, half + 1.5, w - m))
     north = Flow((-w + m, -half, w - m, -half + 2.0), (-w + m, half + 1.0, w - m, half + 1.5))
-    return Scenario("crossing", np.array(walls), (-half, -half, half, half), (east, north), options=dict(opt))
+    # people stop on the pavements of the four arms, beside the walls, away from the entrances
+    near, far = w + 1.0, half - 3.0
+    bands = tuple(rect for rect in (
+        (near, w - 1.0, far, w - 0.85), (-far, -w + 0.85, -near, -w + 1.0),
+        (w - 1.0, -far, w - 0.85, -near), (-w + 0.85, near, -w + 1.0, far)) if rect[0] < rect[2] and rect[1] < rect[3])
+    return Scenario("crossing", np.array(walls), (-half, -half, half, half), (east, north), stop_areas=bands,
+                    options=dict(opt))
 
 
 def bottleneck(opt: Mapping[str, float]) -> Scenario:
@@ -179,8 +192,10 @@ def plaza(opt: Mapping[str, float]) -> Scenario:
         ((s - 1.5, g0 + m, s - m, g1 - m), (s + 1.0, g0 + m, s + 1.5, g1 - m)),  # east
     ]
     flows = tuple(Flow(gates[a][0], gates[b][1]) for a in range(4) for b in range(4) if a != b)
+    # groups stop anywhere but in the entrances' approaches; two points of interest (a kiosk, a notice board)
+    pois = ((0.3 * s, 0.7 * s), (0.7 * s, 0.3 * s))
     return Scenario("plaza", np.array(walls), (0.0, 0.0, s, s), flows, interior=(1.0, 1.0, s - 1.0, s - 1.0),
-                    options=dict(opt))
+                    stop_areas=((2.5, 2.5, s - 2.5, s - 2.5),) if s > 6.0 else (), pois=pois, options=dict(opt))
 
 
 def circle_crossing(opt: Mapping[str, float]) -> Scenario:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crowdsim import forces, kernels
+from crowdsim import behaviours, forces, kernels
 from crowdsim.config import SimConfig
 from crowdsim.events import apply_events
 from crowdsim.groups import (
@@ -117,7 +117,7 @@ class CrowdSimulator:
             elif progress_max > 0:
                 origin = origin + self.rng.uniform(0.0, progress_max) * (target - origin)
             direction = target - origin
-            local = formation_offsets(size, self.config.groups.formation_spacing_m)
+            local = formation_offsets(size, self.config.groups.formation_spacing_m * self._spacing_factor(size))
             offsets = rotate_to(local - local.mean(axis=0), direction)
             radius = self._radii(size)
             pos = origin + offsets
@@ -137,20 +137,39 @@ class CrowdSimulator:
             return pos, radius
         return np.vstack([pos, self.robot.pos[None]]), np.append(radius, self.robot.radius_m)
 
-    def _add_group(self, pos: np.ndarray, goals: np.ndarray, radius: np.ndarray) -> None:
+    def _spacing_factor(self, size: int) -> float:
+        """This group's scale of the formation spacing: 1 + N(0, member_spacing_std), within [0.6, 1.4]."""
+        std = self.config.behaviour.member_spacing_std
+        return float(np.clip(1.0 + self.rng.normal(0.0, std), 0.6, 1.4)) if size > 1 and std > 0 else 1.0
+
+    def _member_speeds(self, size: int, speed: float) -> np.ndarray:
+        """(size,) desired speeds, m/s: the group's plus N(0, member_speed_std_mps) each, clipped."""
+        std, social = self.config.behaviour.member_speed_std_mps, self.config.social
+        if size == 1 or std == 0:
+            return np.full(size, speed)
+        return np.clip(speed + self.rng.normal(0.0, std, size), social.desired_speed_min_mps,
+                       social.desired_speed_max_mps)
+
+    def _add_group(self, pos: np.ndarray, goals: np.ndarray, radius: np.ndarray,
+                   speed: float | None = None) -> int:
+        """Activate a new group at pos (n, 2) with goals (n, 2) and radii (n,); returns its label."""
         size = len(pos)
         free = np.flatnonzero(~self.slots.active)
         if len(free) < size:
             raise RuntimeError("no free pedestrian slots")
         label = self.book.new_label()
         self.book.enter(label, size, self.time_s)
-        speed = group_speed(self.rng, size, self.config.social, self.config.groups)
+        if speed is None:
+            speed = group_speed(self.rng, size, self.config.social, self.config.groups)
+        speeds = self._member_speeds(size, speed)
         for k, slot in enumerate(free[:size]):
-            self.slots.activate(slot, self._next_ped_id, label, pos[k], goals[k], radius[k], speed)
+            self.slots.activate(slot, self._next_ped_id, label, pos[k], goals[k], radius[k], speeds[k])
             self.world.add(int(slot), pos[k], np.zeros(2), radius[k], self.config.mass_kg)
             self._next_ped_id += 1
         self._index_cache = None
         self.n_spawned += size
+        self.book.last_spawned = label
+        return label
 
     # ------------------------------------------------------------------------------------------ robot
     def set_robot(self, pos: np.ndarray, vel: np.ndarray, radius_m: float | None = None) -> None:
@@ -180,6 +199,7 @@ class CrowdSimulator:
         self._wrap_periodic()
         self._arrivals()
         apply_events(self.slots, self.book, self.rng, self.config, self.scenario)
+        behaviours.update(self.slots, self.book, self.rng, self.config, self.scenario, self.time_s)
         if self.scenario.continuous:
             self._inflow()
         self._index_cache = None
@@ -277,6 +297,8 @@ class CrowdSimulator:
     def _arrivals(self) -> None:
         s, scen = self.slots, self.scenario
         idx = np.flatnonzero(s.active)
+        if self.book.stops:  # a group on its way to a stop, or standing, has not arrived anywhere
+            idx = idx[~behaviours.stopped(self.book, s.label[idx])]
         dist = np.linalg.norm(s.pos[idx] - s.goal[idx], axis=1)
         if scen.on_arrival == "remove":
             # a group leaves together: with one member out, those within 2 m of their own exit follow at once
@@ -315,8 +337,29 @@ class CrowdSimulator:
                                                       self.config.n_pedestrians)
         if int((~self.slots.active).sum()) < self.book.pending_size:
             return
-        if self._try_spawn_group(self.book.pending_size, 0.0, tries=3):
+        if self.book.pending_size == 1 and self._try_spawn_stranger():
             self.book.pending_size = 0
+        elif self._try_spawn_group(self.book.pending_size, 0.0, tries=3):
+            self.book.pending_size = 0
+
+    def _try_spawn_stranger(self) -> bool:
+        """With probability `stranger_companion_prob`, the arriving single enters beside or behind the group
+        that entered last (if that was under 5 s ago): a stranger walking close (`behaviours.stranger_spot`)."""
+        p = self.config.behaviour.stranger_companion_prob
+        last = self.book.last_spawned
+        if p == 0 or self.rng.random() >= p or last not in self.book.entered or last in self.book.stops:
+            return False
+        members = np.flatnonzero(self.slots.active & (self.slots.label == last))
+        if len(members) == 0 or self.time_s - self.book.entered[last][0] > 5.0:
+            return False
+        spot, target, speed = behaviours.stranger_spot(self.slots, members, self.rng)
+        radius = self._radii(1)
+        centre = self.slots.pos[members].mean(axis=0)
+        if forces.crossed_walls(centre[None], spot[None], self.scenario.walls).any() or not placement_ok(
+                spot[None], radius, *self._occupied(self.slots.active), self.scenario.walls):
+            return False
+        self._add_group(spot[None], target[None], radius, speed)
+        return True
 
     # ------------------------------------------------------------------------------------------ state
     def state(self) -> CrowdState:

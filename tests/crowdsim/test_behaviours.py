@@ -1,0 +1,114 @@
+"""Stops in F-formations, meeting and parting at a stop, strangers who walk close, variation inside groups."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crowdsim.behaviours import assign_places, fformation
+from crowdsim.config import BehaviourConfig, SimConfig
+from crowdsim.sim import CrowdSimulator
+
+STOPPING = BehaviourConfig(stop_rate_hz=0.05, stop_mean_s=30.0)
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 5])
+def test_fformation_puts_neighbours_at_the_spacing_on_a_circle(n):
+    centre = np.array([3.0, -1.0])
+    places = fformation(n, centre, 0.9, phase=0.3)
+    radii = np.linalg.norm(places - centre, axis=1)
+    assert np.allclose(radii, radii[0])
+    gaps = np.linalg.norm(places - np.roll(places, 1, axis=0), axis=1)
+    assert np.allclose(gaps, 0.9) if n > 2 else gaps[0] == pytest.approx(0.9)
+    moved = assign_places(places[::-1] + 0.05, places, centre)  # members already near their places keep them
+    assert np.allclose(moved, places[::-1])
+
+
+def run(config: SimConfig, seed: int, steps: int):
+    sim = CrowdSimulator(config)
+    sim.reset(seed)
+    return sim, [sim.step() for _ in range(steps)]
+
+
+def test_stopped_groups_stand_still_in_their_fformation_and_then_walk_on():
+    sim = CrowdSimulator(SimConfig(scenario="plaza", n_pedestrians=24, behaviour=STOPPING))
+    sim.reset(0)
+    spacing = STOPPING.fformation_spacing_m
+    standing_speeds, radius_errors, ended = [], [], 0
+    watch: dict[int, float] = {}  # label -> when its stop ended
+    for _ in range(900):
+        before = {lb for lb, st in sim.book.stops.items() if st.standing}
+        state = sim.step()
+        for label in before - set(sim.book.stops):
+            watch[int(label)] = state.time_s
+            ended += 1
+        for label, stop in sim.book.stops.items():
+            members = state.active & (state.label == label)
+            if not stop.standing or state.time_s - stop.since_s < 4.0 or members.sum() < 2:
+                continue
+            n = int(members.sum())
+            design = spacing / 2 if n == 2 else spacing / (2 * np.sin(np.pi / n))
+            radius_errors.append(np.linalg.norm(state.pos[members] - stop.centre, axis=1).mean() - design)
+            standing_speeds.extend(np.linalg.norm(state.vel[members], axis=1))
+    assert len(standing_speeds) > 500 and ended >= 5
+    assert np.median(standing_speeds) < 0.1  # they stand (body sway from the fluctuation force aside)
+    assert abs(np.median(radius_errors)) < 0.15  # in the circle they were given
+    # groups whose stop ended walked on: they are either gone through an exit or moving at walking pace
+    state = sim.state()
+    for label in watch:
+        members = state.active & (state.label == label)
+        if members.any() and state.time_s - watch[label] > 5.0:
+            assert np.linalg.norm(state.vel[members], axis=1).mean() > 0.5
+
+
+def test_no_stops_unless_configured():
+    sim, _ = run(SimConfig(scenario="plaza", n_pedestrians=24), 0, 300)
+    assert not sim.book.stops and sim.book.next_label > 24  # plenty of groups came and none stopped
+
+
+def test_singles_join_standing_groups_and_members_part_with_new_labels():
+    cfg = BehaviourConfig(stop_rate_hz=0.05, join_rate_hz=0.2, part_rate_hz=0.02)
+    sim = CrowdSimulator(SimConfig(scenario="plaza", n_pedestrians=30, behaviour=cfg))
+    state = sim.reset(1)
+    joined, parted = 0, 0
+    for _ in range(900):
+        old = dict(zip(state.ped_id[state.active].tolist(), state.label[state.active].tolist(), strict=True))
+        sizes_before = {lb: int(np.sum(state.active & (state.label == lb))) for lb in set(old.values())}
+        state = sim.step()
+        for ped, label in zip(state.ped_id[state.active].tolist(), state.label[state.active].tolist(), strict=True):
+            if ped in old and old[ped] != label:
+                if sizes_before[old[ped]] == 1 and label in sim.book.stops:
+                    joined += 1  # a single took a standing group's label
+                elif label >= sim.book.next_label - 5 and np.sum(state.label == label) == 1:
+                    parted += 1  # a member left with a fresh label of its own
+    assert joined >= 3 and parted >= 3
+
+
+def test_strangers_enter_close_enough_that_distance_alone_calls_them_a_group():
+    """With every arriving single placed beside or behind the last group, many pairs of people with
+    different labels stay within 1.5 m for 8 consecutive recorded steps (3.2 s): the distance rule that
+    finds groups in a crowd without strangers makes false pairs here."""
+    base = dict(scenario="plaza", n_pedestrians=24)
+    false_pairs = []
+    for prob in (0.0, 1.0):
+        _, states = run(SimConfig(behaviour=BehaviourConfig(stranger_companion_prob=prob), **base), 2, 400)
+        close: dict[tuple[int, int], int] = {}
+        pairs = set()
+        for s in states:
+            act = np.flatnonzero(s.active)
+            d = np.linalg.norm(s.pos[act, None] - s.pos[None, act], axis=2)
+            i, j = np.nonzero(np.triu(d < 1.5, 1))
+            now = {(int(s.ped_id[act[a]]), int(s.ped_id[act[b]])) for a, b in zip(i, j, strict=True)
+                   if s.label[act[a]] != s.label[act[b]]}
+            close = {p: close.get(p, 0) + 1 for p in now}
+            pairs |= {p for p, k in close.items() if k >= 8}
+        false_pairs.append(len(pairs))
+    assert false_pairs[1] > 1.4 * false_pairs[0], false_pairs
+
+
+def test_members_of_a_group_differ_slightly_in_desired_speed():
+    sim, _ = run(SimConfig(scenario="plaza", n_pedestrians=40), 3, 50)
+    act = np.flatnonzero(sim.slots.active)
+    spreads = [np.std(sim.slots.speed[act[sim.slots.label[act] == lb]]) for lb in np.unique(sim.slots.label[act])
+               if np.sum(sim.slots.label[act] == lb) >= 2]
+    assert 0.01 < np.mean(spreads) < 0.1
