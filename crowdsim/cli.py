@@ -13,6 +13,7 @@ import numpy as np
 
 from crowdsim.config import GroupConfig, SimConfig
 from crowdsim.generate import BACKENDS, SPLITS, RunSpec, generate, make_dataset
+from crowdsim.presets import PRESETS, get_preset, sample_config
 from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS
 
 
@@ -62,13 +63,31 @@ def _check_out_dir(path: Path) -> None:
             return
 
 
+class _DefaultInt(int):
+    """A default value that remembers it was not given on the command line (a preset may not be mixed with
+    the flags it sets)."""
+
+
+class _DefaultFloat(float):
+    """See `_DefaultInt`."""
+
+
+PRESET_SETS = ("pedestrians", "leave_rate", "merge_rate", "option")  # flags a --preset draws per recording
+
+
+def _given(args: argparse.Namespace, dest: str) -> bool:
+    value = getattr(args, dest)
+    return bool(value) if isinstance(value, list) else not isinstance(value, _DefaultInt | _DefaultFloat)
+
+
 def _common(p: argparse.ArgumentParser, duration: float) -> None:
-    p.add_argument("--pedestrians", type=int, default=40, help="crowd size (kept constant by inflow)")
+    p.add_argument("--pedestrians", type=int, default=_DefaultInt(40), help="crowd size (kept constant by inflow)")
     p.add_argument("--duration", type=float, default=duration, help="recorded seconds")
     p.add_argument("--warmup", type=float, default=4.0, help="unrecorded seconds before recording")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--leave-rate", type=float, default=0.0, help="per-group rate (1/s) of a member leaving")
-    p.add_argument("--merge-rate", type=float, default=0.0, help="per-group rate (1/s) of merging")
+    p.add_argument("--leave-rate", type=float, default=_DefaultFloat(0.0),
+                   help="per-group rate (1/s) of a member leaving")
+    p.add_argument("--merge-rate", type=float, default=_DefaultFloat(0.0), help="per-group rate (1/s) of merging")
     p.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
                    help="scenario option, e.g. width_m=5 (repeatable)")
 
@@ -104,7 +123,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--rrd", action="store_true", help="also write a rerun recording")
     _common(g, 120.0)
     d = sub.add_parser("dataset", help="several scenarios x seeds into train/val/test folders")
-    d.add_argument("--scenarios", default="corridor,crossing,plaza,circle_crossing")
+    d.add_argument("--scenarios", default=None,
+                   help="comma-separated names (default: the preset's, or corridor,crossing,plaza,circle_crossing)")
+    d.add_argument("--preset", default=None, choices=sorted(PRESETS),
+                   help="draw each recording's parameters from this training preset (crowdsim presets lists "
+                        "them); it sets --pedestrians, --leave-rate, --merge-rate and --option")
     d.add_argument("--seeds-per-scenario", type=int, default=6)
     d.add_argument("--out", type=Path, required=True)
     d.add_argument("--backend", choices=BACKENDS, default="local",
@@ -119,6 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     m = sub.add_parser("demo", help="generate and record a grouped crowd on built-in defaults")
     m.add_argument("--out", type=Path, default=Path("out/demo-crowd"))
     sub.add_parser("scenarios", help="list the scenario names")
+    sub.add_parser("presets", help="list the training presets of `dataset --preset`")
     for command in sub.choices.values():
         show_defaults(command)
     return parser
@@ -169,6 +193,10 @@ def _run(args: argparse.Namespace) -> int:
             opts = ", ".join(f"{k}={v:g}" for k, v in SCENARIO_OPTIONS[name].items())
             print(f"{name}  (options: {opts})")
         return 0
+    if args.command == "presets":
+        for preset in PRESETS.values():
+            print(f"{preset.name}  (version {preset.version}: {preset.description})")
+        return 0
     if args.command == "generate":
         config, spec = _config(args, args.scenario), _spec(args)
         _check_out_dir(args.out)
@@ -192,7 +220,12 @@ def _dataset(args: argparse.Namespace) -> int:
     problem = _dataset_usage_error(args)
     if problem is not None:
         return _error(problem)
-    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    mixed = [f"--{d.replace('_', '-')}" for d in PRESET_SETS if args.preset and _given(args, d)]
+    if mixed:
+        raise ValueError(f"--preset {args.preset} draws {', '.join(mixed)} per recording; leave them out")
+    default = ",".join(get_preset(args.preset).scenarios) if args.preset else "corridor,crossing,plaza,circle_crossing"
+    scenarios = [s.strip() for s in (args.scenarios if args.scenarios is not None else default).split(",")
+                 if s.strip()]
     if not scenarios:
         raise ValueError("--scenarios is empty; valid names: " + ", ".join(sorted(SCENARIOS)))
     if args.seeds_per_scenario < 3:
@@ -201,10 +234,12 @@ def _dataset(args: argparse.Namespace) -> int:
     base, spec = _config(args, scenarios[0]), _spec(args)
     for s in scenarios:
         _config(args, s)
+        if args.preset:
+            sample_config(get_preset(args.preset), s, args.seed)  # a scenario the preset lacks: error now
     _check_out_dir(args.out)
     try:
         out = make_dataset(args.out, scenarios, args.seeds_per_scenario, base, spec, backend=args.backend,
-                           workers=args.workers, address=args.address)
+                           workers=args.workers, address=args.address, preset=args.preset)
     except ConnectionError as exc:  # ray.init could not reach --address
         print(f"crowdsim: error: cannot connect to Ray at {args.address}: {exc}", file=sys.stderr)
         return 1

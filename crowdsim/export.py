@@ -33,15 +33,15 @@ class TrajectoryLog:
 
     rows: list[np.ndarray] = field(default_factory=list)
 
-    def add(self, state: CrowdState, labels: np.ndarray) -> None:
-        """Append the active rows of `state`; labels (C,) are the simulator's global group labels."""
+    def add(self, state: CrowdState) -> None:
+        """Append the active rows of `state`, with their stable group labels (`state.label`)."""
         act = state.active
         n = int(act.sum())
         block = np.empty((n, 5))
         block[:, 0] = state.frame * FRAME_STRIDE
         block[:, 1] = state.ped_id[act]
         block[:, 2:4] = state.pos[act]
-        block[:, 4] = labels[act]
+        block[:, 4] = state.label[act]
         self.rows.append(block)
 
     def table(self) -> np.ndarray:

@@ -17,6 +17,7 @@ from tqdm import tqdm
 from crowdsim import __version__
 from crowdsim.config import SimConfig
 from crowdsim.export import RecordingFiles, TrajectoryLog, recording_files, write_files, write_recording
+from crowdsim.presets import get_preset, sample_config
 from crowdsim.sim import CrowdSimulator
 
 SPLITS = ("train", "val", "test")
@@ -59,17 +60,20 @@ def simulate(config: SimConfig, spec: RunSpec, rrd_path: Path | None = None,
         if k:
             state = sim.step()
         shifted = replace(state, frame=state.frame - start, time_s=(state.frame - start) * config.record_dt_s)
-        log.add(shifted, sim.slots.label)
+        log.add(shifted)
         if recorder is not None:
-            recorder.log_frame(shifted, sim.slots.label)
+            recorder.log_frame(shifted)
     if recorder is not None:
         recorder.close()
     return log, sim
 
 
-def metadata(config: SimConfig, spec: RunSpec, sim: CrowdSimulator) -> dict[str, Any]:
+def metadata(config: SimConfig, spec: RunSpec, sim: CrowdSimulator,
+             preset: str | None = None) -> dict[str, Any]:
+    """The JSON metadata of a recording; `preset` ("name@version") when its config was drawn from a preset."""
     return {
         "generator": f"crowdsim {__version__}",
+        "preset": preset,
         "scenario": config.scenario,
         "seed": spec.seed,
         "steps": int(round(spec.duration_s / config.record_dt_s)),
@@ -107,13 +111,14 @@ class RecordingJob:
     spec: RunSpec
     split: str
     name: str
+    preset: str | None = None  # "name@version" of the preset the config was drawn from
 
 
 def render_job(job: RecordingJob) -> RecordingFiles:
     """Simulate one dataset recording and return its files as texts (written by the caller): the unit of
     work of every backend, so that they all produce the same bytes."""
     log, sim = simulate(job.config, job.spec)
-    return recording_files(job.name, log, metadata(job.config, job.spec, sim))
+    return recording_files(job.name, log, metadata(job.config, job.spec, sim, job.preset))
 
 
 def split_of(index: int, n: int) -> str:
@@ -126,16 +131,19 @@ def split_of(index: int, n: int) -> str:
     return ("train", "train", "train", "train", "val", "test")[index % 6] if n > 6 else "train"
 
 
-def dataset_jobs(scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
-                 spec: RunSpec) -> list[RecordingJob]:
+def dataset_jobs(scenarios: list[str], seeds_per_scenario: int, base: SimConfig, spec: RunSpec,
+                 preset: str | None = None) -> list[RecordingJob]:
     """The recordings of a dataset, scenario-major: seed spec.seed + k of each scenario goes to
-    `split_of(k, seeds_per_scenario)`."""
+    `split_of(k, seeds_per_scenario)`. With a preset name, each recording's config is drawn from the preset
+    (`crowdsim.presets.sample_config`, from the scenario and the recording's seed) instead of `base`."""
+    chosen = get_preset(preset) if preset is not None else None
     jobs = []
     for scen in scenarios:
-        config = replace(base, scenario=scen)
         for k in range(seeds_per_scenario):
             run = replace(spec, seed=spec.seed + k)
-            jobs.append(RecordingJob(config, run, split_of(k, seeds_per_scenario), default_name(config, run)))
+            config = sample_config(chosen, scen, run.seed) if chosen else replace(base, scenario=scen)
+            tag = f"{chosen.name}@{chosen.version}" if chosen else None
+            jobs.append(RecordingJob(config, run, split_of(k, seeds_per_scenario), default_name(config, run), tag))
     return jobs
 
 
@@ -169,7 +177,7 @@ def run_local(jobs: list[RecordingJob], workers: int = 1) -> Iterator[tuple[int,
 
 def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
                  spec: RunSpec, progress: bool = True, backend: str = "local", workers: int | None = None,
-                 address: str | None = None) -> dict[str, list[Path]]:
+                 address: str | None = None, preset: str | None = None) -> dict[str, list[Path]]:
     """Generate `seeds_per_scenario` recordings per scenario into out_dir/{train,val,test}/.
 
     Seeds are spec.seed + k; recording k of a scenario goes to `split_of(k, seeds_per_scenario)`.
@@ -183,6 +191,8 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
             instance it starts (None: all cores); must be None with `address`.
         address: Ray only: None starts a local Ray instance; "auto" or "HOST:PORT" connects to a running
             cluster, whose nodes need crowdsim installed. An already initialised Ray is used as it is.
+        preset: a `crowdsim.presets.PRESETS` name: each recording's config is drawn from it (base is unused);
+            its metadata records "name@version".
 
     Returns the trajectory file paths of each split, in job order (scenario-major, then seed).
     """
@@ -194,7 +204,7 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
         raise ValueError(f"workers must be >= 1, got {workers}")
     if workers is not None and address is not None:
         raise ValueError("workers sizes a local Ray instance; with an address the cluster's CPUs decide")
-    jobs = dataset_jobs(scenarios, seeds_per_scenario, base, spec)
+    jobs = dataset_jobs(scenarios, seeds_per_scenario, base, spec, preset)
     if backend == "ray":
         from crowdsim.distributed import run_on_ray
 

@@ -31,7 +31,7 @@ def _flip(xy: np.ndarray) -> np.ndarray:
 class RrdRecorder:
     """Streams crowd frames into a .rrd file.
 
-    `log_frame(state, labels)` logs the active pedestrians as points (radius = body radius) with
+    `log_frame(state)` logs the active pedestrians as points (radius = body radius) with
     class ids `label % 24`, so every group keeps one colour for its lifetime, plus their goals' lines
     when `show_goals` is set. `close()` flushes the file.
     """
@@ -52,7 +52,7 @@ class RrdRecorder:
             strips = [_flip(seg) for seg in np.asarray(walls)]
             self.rec.log("world/walls", rr.LineStrips2D(strips, colors=[(200, 200, 200)]), static=True)
 
-    def log_frame(self, state: CrowdState, labels: np.ndarray) -> None:
+    def log_frame(self, state: CrowdState) -> None:
         rr = self.rr
         act = state.active
         self.rec.set_time("frame", sequence=int(state.frame))
@@ -62,7 +62,7 @@ class RrdRecorder:
             rr.Points2D(
                 _flip(state.pos[act]),
                 radii=state.radius[act].astype(np.float32),
-                class_ids=(labels[act] % N_COLOURS).astype(np.uint16),
+                class_ids=(state.label[act] % N_COLOURS).astype(np.uint16),
                 labels=[str(int(p)) for p in state.ped_id[act]],
                 show_labels=False,
             ),

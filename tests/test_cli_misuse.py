@@ -69,6 +69,10 @@ CASES = [
     ("crowdsim", "dataset --seeds-per-scenario 1 --out {tmp}/ds"),
     ("crowdsim", "dataset --address auto --out {tmp}/ds"),
     ("crowdsim", "dataset --workers 0 --out {tmp}/ds"),
+    ("crowdsim", "dataset --preset realistic-v1 --pedestrians 30 --out {tmp}/ds"),
+    ("crowdsim", "dataset --preset realistic-v1 --option width_m=5 --out {tmp}/ds"),
+    ("crowdsim", "dataset --preset realistic-v1 --scenarios open --out {tmp}/ds"),
+    ("crowdsim", "dataset --preset realistic --out {tmp}/ds"),
 ]
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crowdsim.behaviours import assign_places, fformation
-from crowdsim.config import BehaviourConfig, SimConfig
+from crowdsim.config import BehaviourConfig, GroupConfig, SimConfig
 from crowdsim.sim import CrowdSimulator
 
 STOPPING = BehaviourConfig(stop_rate_hz=0.05, stop_mean_s=30.0)
@@ -112,3 +112,51 @@ def test_members_of_a_group_differ_slightly_in_desired_speed():
     spreads = [np.std(sim.slots.speed[act[sim.slots.label[act] == lb]]) for lb in np.unique(sim.slots.label[act])
                if np.sum(sim.slots.label[act] == lb) >= 2]
     assert 0.01 < np.mean(spreads) < 0.1
+
+
+def _triple_shapes(n: int, seed: int = 0, steps: int = 300) -> tuple[dict[str, float], float]:
+    """Shares of walking triples abreast / V (middle member behind) / river (deeper than wide), and the
+    median angle of pairs to the walking direction (90 = abreast), in a 40 x 4 m two-way corridor."""
+    config = SimConfig(scenario="corridor", n_pedestrians=n, groups=GroupConfig(size_poisson_rate=1.5, max_size=3),
+                       scenario_options=(("length_m", 40.0), ("width_m", 4.0)))
+    _, states = run(config, seed, steps)
+    shapes, angles = [], []
+    for s in states[60:]:
+        act = np.flatnonzero(s.active & (s.pos[:, 0] > 5.0) & (s.pos[:, 0] < 35.0))
+        for label in np.unique(s.label[act]):
+            m = act[s.label[act] == label]
+            v = s.vel[m].mean(axis=0)
+            if np.linalg.norm(v) < 0.2 or len(m) == 1:
+                continue
+            e = v / np.linalg.norm(v)
+            fwd, lat = np.array([e, [-e[1], e[0]]]) @ (s.pos[m] - s.pos[m].mean(axis=0)).T
+            if len(m) == 2:
+                angles.append(np.degrees(np.arctan2(abs(lat[1] - lat[0]), abs(fwd[1] - fwd[0]))))
+                continue
+            left, mid, right = np.argsort(lat)
+            if np.ptp(fwd) > np.ptp(lat):
+                shapes.append("river")
+            elif fwd[mid] < min(fwd[left], fwd[right]) - 0.2:
+                shapes.append("V")
+            else:
+                shapes.append("abreast")
+    kinds, counts = np.unique(shapes, return_counts=True)
+    return dict(zip(kinds.tolist(), (counts / counts.sum()).tolist(), strict=True)), float(np.median(angles))
+
+
+def test_formations_change_with_density_from_abreast_to_v_and_river():
+    """Moussaïd et al. 2010: at low density pairs and triples walk abreast; as density rises, pairs fall
+    back into a slanted line and triples bend into a V (middle member behind) or a river-like file.
+    (Emergent from the group forces and the crowd, not scripted; two seeds each.)"""
+    sparse = [_triple_shapes(12, seed) for seed in (0, 1)]
+    dense = [_triple_shapes(90, seed) for seed in (0, 1)]
+
+    def share(runs, kind):
+        return float(np.mean([shapes.get(kind, 0.0) for shapes, _ in runs]))
+
+    sparse_angle, dense_angle = (float(np.mean([a for _, a in runs])) for runs in (sparse, dense))
+    assert sparse_angle > 80.0 and dense_angle < sparse_angle - 15.0, (sparse_angle, dense_angle)
+    # sparse: abreast is the commonest shape of a triple (a V also occurs: members' speeds differ a little)
+    assert share(sparse, "abreast") > max(share(sparse, "V"), share(sparse, "river")), sparse
+    assert share(dense, "abreast") < share(sparse, "abreast") - 0.05, (sparse, dense)
+    assert share(dense, "river") > share(sparse, "river") + 0.15, (sparse, dense)
