@@ -28,7 +28,7 @@ from predictor.api import ConstantVelocityConfig, ConstantVelocityPredictor
 from predictor.cli import split_folder
 from predictor.windows import has_labels, load_windows
 
-PROXIMITY_RADII_M = (1.0, 1.5)
+PROXIMITY_RADII_M = (0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0)  # the rule family of issue 11: 0.5-2 m
 
 
 def proximity_groups(obs: np.ndarray, radius_m: float, steps: str = "last") -> np.ndarray:
@@ -47,7 +47,7 @@ def proximity_scores(windows: list) -> dict[str, dict[str, float]]:
             scores = metrics.GroupScores()
             for w in windows:
                 scores.add(w.group_id, proximity_groups(w.obs, r, steps))
-            out[f"{steps}-{r:.1f}m"] = scores.result()
+            out[f"{steps}-{r:.2f}m"] = scores.result()
     return out
 
 

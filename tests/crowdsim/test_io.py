@@ -118,3 +118,64 @@ def test_rerun_recording_holds_every_frame_colour_coded_by_group(tmp_path):
     frame0 = rows[rows[:, 0] == 0][:, 2:4]
     np.testing.assert_allclose(np.sort(first[:, 0]), np.sort(frame0[:, 0]), atol=1e-3)
     np.testing.assert_allclose(np.sort(-first[:, 1]), np.sort(frame0[:, 1]), atol=1e-3)  # y-down view
+
+
+def test_vectorised_text_is_byte_identical_to_python_formatting():
+    """The export texts are built with numpy; they must equal the plain f-string formatting byte for byte,
+    including Python's half-to-even rounding of exact ties (multiples of 1/32), "-0.0000" for negative values
+    that round to zero, multi-digit-group ids, and the fallback for non-finite values."""
+    from crowdsim.export import (
+        _fixed4_chars,
+        labels_text,
+        labels_text_reference,
+        trajectories_text,
+        trajectories_text_reference,
+    )
+
+    rng = np.random.default_rng(0)
+    xs = np.concatenate([
+        rng.uniform(-100.0, 100.0, 3000), np.round(rng.uniform(-50.0, 50.0, 3000), 5),
+        np.arange(-256, 257) / 32.0,  # exact ties at the 4th decimal: 0.03125 -> 0.0312, 0.09375 -> 0.0938
+        np.arange(-300, 300) / 20000.0,  # near-ties that are not exact in binary
+        [0.0, -0.0, 1e-9, -1e-9, -0.00004999, 0.00005, -0.00005, 9999.99995, 123456.78905, -500000.0],
+    ])
+    n = len(xs)
+    table = np.column_stack([np.arange(n) * 10 // 7 * 10, rng.integers(1, 10**9, n), xs, xs[::-1],
+                             rng.integers(-1, 10**5, n)]).astype(float)
+    assert _fixed4_chars(xs) is not None  # the vectorised path, not the fallback
+    assert trajectories_text(table) == trajectories_text_reference(table)
+    assert labels_text(table) == labels_text_reference(table)
+    small = table[:50].copy()
+    small[:, 1] = np.arange(50)  # ids that fit one 4-digit look-up, with a zero
+    assert trajectories_text(small) == trajectories_text_reference(small)
+    small[2, 2] = 123456789.12345  # beyond the exact fast path
+    small[3, 2] = np.nan
+    small[4, 3] = -np.inf
+    assert trajectories_text(small) == trajectories_text_reference(small)  # falls back: "nan", "-inf"
+    assert trajectories_text(table[:0]) == labels_text(table[:0]) == ""
+
+
+def test_trajectory_log_orders_rows_and_majority_labels_break_ties_by_smallest():
+    from crowdsim.export import TrajectoryLog, majority_labels
+    from crowdsim.state import CrowdState
+
+    def state(frame, peds, labels):
+        k = len(peds)
+        return CrowdState(pos=np.c_[np.arange(k), -np.arange(k)].astype(float), vel=np.zeros((k, 2)),
+                          goal=np.zeros((k, 2)), radius=np.full(k, 0.2), group_id=np.zeros(k, np.int64),
+                          ped_id=np.array(peds), active=np.array(peds) > 0, label=np.array(labels),
+                          frame=frame, time_s=0.4 * frame)
+
+    states = [state(1, [5, 2, -1, 9], [7, 3, -1, 7]), state(0, [2, 5], [3, 4]), state(2, [9, 5, 2], [7, 7, 4])]
+    log = TrajectoryLog()
+    for s in states:
+        log.add(s)
+    table = log.table()  # added out of frame order: sorted by frame, then ped id
+    assert table[:, :2].tolist() == [[0, 2], [0, 5], [10, 2], [10, 5], [10, 9], [20, 2], [20, 5], [20, 9]]
+    in_order = TrajectoryLog()
+    for s in sorted(states, key=lambda s: s.frame):
+        in_order.add(s)
+    np.testing.assert_array_equal(in_order.table(), table)
+    # ped 2: labels 3, 3, 4 -> 3; ped 5: 4, 7, 7 -> 7; ped 9: 7, 7 -> 7; a tie goes to the smaller label
+    assert majority_labels(table) == {2: 3, 5: 7, 9: 7}
+    assert majority_labels(table[[0, 1, 3]]) == {2: 3, 5: 4}  # ped 5: labels 4 and 7 once each
