@@ -364,4 +364,4 @@ class CrowdSimulator:
     # ------------------------------------------------------------------------------------------ state
     def state(self) -> CrowdState:
         """A copy of the current state (capacity-sized arrays with an active mask)."""
-        return self.slots.snapshot(self.frame, self.time_s)
+        return self.slots.snapshot(self.frame, self.time_s, self._active_index()[1])

@@ -77,11 +77,12 @@ class Slots:
         _, dense = np.unique(self.label[idx], return_inverse=True)
         return dense.astype(np.int64)
 
-    def snapshot(self, frame: int, time_s: float) -> CrowdState:
+    def snapshot(self, frame: int, time_s: float, dense: np.ndarray | None = None) -> CrowdState:
+        """The state now; dense: the active rows' dense labels if the caller has them (else computed)."""
         act = self.active.copy()
         nan2 = np.where(act[:, None], 1.0, np.nan)
         group = np.full(len(act), -1, np.int64)
-        group[act] = self.dense_labels(np.flatnonzero(act))
+        group[act] = self.dense_labels(np.flatnonzero(act)) if dense is None else dense
         return CrowdState(
             pos=self.pos * nan2, vel=self.vel * nan2, goal=self.goal * nan2,
             radius=np.where(act, self.radius, np.nan), group_id=group, ped_id=self.ped_id.copy(),
