@@ -91,23 +91,30 @@ def wall_acc(pos: np.ndarray, radius: np.ndarray, segments: np.ndarray,
 
 
 def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray, i: np.ndarray,
-              j: np.ndarray, params: GroupForceParams) -> np.ndarray:
+              j: np.ndarray, params: GroupForceParams, gaze_label: np.ndarray | None = None) -> np.ndarray:
     """(N, 2) Moussaïd et al. (2010) group terms: gaze, coherence and intra-group repulsion.
 
-    label: (N,) dense group labels 0..G-1. Pairs (i, j) from the spatial index are reused for the
-    repulsion between members closer than d0. Singletons receive no group force.
+    label: (N,) dense group labels 0..G-1. gaze_label: (N,) dense labels of the sub-groups whose centre each
+    member looks at (default: the whole group); groups above three walk as sub-groups (Moussaïd et al. 2010),
+    and the front one is not held back by looking round at the one behind. Pairs (i, j) from the spatial index
+    are reused for the repulsion between members closer than d0. Singletons receive no group force.
     """
     n = len(pos)
+    gaze_label = label if gaze_label is None else gaze_label
     n_groups = int(label.max()) + 1 if n else 0
     size = np.bincount(label, minlength=n_groups)[label].astype(float)
     in_group = size > 1
     centre = scatter_add(n_groups, label, pos)[label] / size[:, None]
-    # Gaze: rotate the head towards the other members' centre; beyond the vision field, slow down.
-    others = (centre * size[:, None] - pos) / np.maximum(size - 1.0, 1.0)[:, None]
+    # Gaze: rotate the head towards the other members' centre (of one's sub-group); beyond the vision field,
+    # slow down.
+    n_sub = int(gaze_label.max()) + 1 if n else 0
+    sub = np.bincount(gaze_label, minlength=n_sub)[gaze_label].astype(float)
+    sub_centre = scatter_add(n_sub, gaze_label, pos)[gaze_label] / sub[:, None]
+    others = (sub_centre * sub[:, None] - pos) / np.maximum(sub - 1.0, 1.0)[:, None]
     to_others, _ = unit(others - pos)
     angle = np.arccos(np.clip(np.einsum("nk,nk->n", e, to_others), -1.0, 1.0))
     alpha = np.maximum(angle - np.deg2rad(params.vision_half_angle_deg), 0.0)
-    acc = -params.gaze_strength * (alpha * in_group)[:, None] * vel
+    acc = -params.gaze_strength * (alpha * (in_group & (sub > 1)))[:, None] * vel
     # Coherence: attraction to the centre of mass once farther than (n - 1) / 2 m (smoothed over 0.25 m).
     to_centre, d_centre = unit(centre - pos)
     q = np.clip((d_centre - 0.5 * (size - 1.0)) / 0.25, 0.0, 1.0) * in_group

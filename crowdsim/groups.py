@@ -72,6 +72,21 @@ def rotate_to(offsets: np.ndarray, direction: np.ndarray) -> np.ndarray:
     return offsets @ rot.T
 
 
+def gaze_subgroups(pos: np.ndarray, goal: np.ndarray, label: np.ndarray, max_abreast: int = 3) -> np.ndarray:
+    """(n,) dense sub-group labels: groups of up to max_abreast are one sub-group; a larger group splits into
+    a front and a back row along its walking direction (towards the mean goal), the front row holding
+    ceil(size / 2) members, as groups above three split into sub-groups (Moussaïd et al. 2010).
+    pos, goal (n, 2) m; label (n,) dense group labels."""
+    sub = label * 2
+    counts = np.bincount(label)
+    for g in np.flatnonzero(counts > max_abreast):
+        members = np.flatnonzero(label == g)
+        heading = goal[members].mean(axis=0) - pos[members].mean(axis=0)
+        order = np.argsort(-(pos[members] @ heading), kind="stable")
+        sub[members[order[(len(members) + 1) // 2:]]] += 1
+    return np.unique(sub, return_inverse=True)[1].astype(np.int64)
+
+
 def formation_goals(positions: np.ndarray, destination: np.ndarray, spacing_m: float) -> np.ndarray:
     """(n, 2) goals for a group at positions (n, 2) heading to destination (2,): the destination plus each
     member's lateral offset of the abreast formation, assigned so that members keep the side of the walking

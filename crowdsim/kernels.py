@@ -42,25 +42,31 @@ def _walls(acc, pos, radius, n, walls, aw, bw, cutoff):
 
 
 @numba.njit(cache=True)
-def _groups(acc, pos, vel, e, label, n, i, j, p):
+def _groups(acc, pos, vel, e, label, gaze_label, n, i, j, p):
     g = label.max() + 1
     sx, sy, cnt = np.zeros(g), np.zeros(g), np.zeros(g)
+    gx, gy, gcnt = np.zeros(n), np.zeros(n), np.zeros(n)
     for k in range(n):
         sx[label[k]] += pos[k, 0]
         sy[label[k]] += pos[k, 1]
         cnt[label[k]] += 1.0
+        gx[gaze_label[k]] += pos[k, 0]
+        gy[gaze_label[k]] += pos[k, 1]
+        gcnt[gaze_label[k]] += 1.0
     for k in range(n):
         size = cnt[label[k]]
         if size < 2:
             continue
         cx, cy = sx[label[k]] / size, sy[label[k]] / size
-        ox = (cx * size - pos[k, 0]) / (size - 1.0) - pos[k, 0]
-        oy = (cy * size - pos[k, 1]) / (size - 1.0) - pos[k, 1]
-        on = math.sqrt(ox * ox + oy * oy)
-        cos = (e[k, 0] * ox + e[k, 1] * oy) / on if on > 1e-9 else 0.0
-        alpha = max(math.acos(min(max(cos, -1.0), 1.0)) - p[11], 0.0)
-        acc[k, 0] -= p[7] * alpha * vel[k, 0]
-        acc[k, 1] -= p[7] * alpha * vel[k, 1]
+        gsize = gcnt[gaze_label[k]]
+        if gsize > 1:
+            ox = (gx[gaze_label[k]] - pos[k, 0]) / (gsize - 1.0) - pos[k, 0]
+            oy = (gy[gaze_label[k]] - pos[k, 1]) / (gsize - 1.0) - pos[k, 1]
+            on = math.sqrt(ox * ox + oy * oy)
+            cos = (e[k, 0] * ox + e[k, 1] * oy) / on if on > 1e-9 else 0.0
+            alpha = max(math.acos(min(max(cos, -1.0), 1.0)) - p[11], 0.0)
+            acc[k, 0] -= p[7] * alpha * vel[k, 0]
+            acc[k, 1] -= p[7] * alpha * vel[k, 1]
         tx, ty = cx - pos[k, 0], cy - pos[k, 1]
         dc = math.sqrt(tx * tx + ty * ty)
         if dc > 1e-9:
@@ -103,7 +109,7 @@ def _pairs(acc, pos, radius, e, i, j, n, p):
 
 
 @numba.njit(cache=True)
-def _all(pos, radius, e, i, j, n, vel, v_des, walls, label, p):
+def _all(pos, radius, e, i, j, n, vel, v_des, walls, label, gaze_label, p):
     acc = np.zeros((n, 2))
     _pairs(acc, pos, radius, e, i, j, n, p)
     for k in range(n):
@@ -111,22 +117,23 @@ def _all(pos, radius, e, i, j, n, vel, v_des, walls, label, p):
         acc[k, 1] += (v_des[k, 1] - vel[k, 1]) / p[3]
     _walls(acc, pos, radius, n, walls, p[4], p[5], p[6])
     if n > 0:
-        _groups(acc, pos, vel, e, label, n, i, j, p)
+        _groups(acc, pos, vel, e, label, gaze_label, n, i, j, p)
     return acc
 
 
 def social_acc(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.ndarray, j: np.ndarray, n: int,
                vel: np.ndarray, v_des: np.ndarray, walls: np.ndarray, label: np.ndarray,
-               params: np.ndarray) -> np.ndarray:
+               gaze_label: np.ndarray, params: np.ndarray) -> np.ndarray:
     """(n, 2) m/s^2: driving + pedestrian + wall + group accelerations of the first n agents.
 
     pos/radius/e (M, 2)/(M,)/(M, 2) include M - n extra agents (robot, periodic ghosts) that push the
     real ones but are not pushed; pairs (i, j) index those rows; vel, v_des (n, 2); walls (S, 2, 2);
-    label (n,) dense group labels; params from `pack_params`.
+    label (n,) dense group labels; gaze_label (n,) dense labels of the sub-groups whose members each one looks
+    at (`groups.gaze_subgroups`); params from `pack_params`.
     """
     return _all(np.ascontiguousarray(pos), radius, np.ascontiguousarray(e), i, j, n,
                 np.ascontiguousarray(vel), np.ascontiguousarray(v_des), np.ascontiguousarray(walls, dtype=float),
-                label, params)
+                label, gaze_label, params)
 
 
 @numba.njit(cache=True)

@@ -20,6 +20,7 @@ from crowdsim.groups import (
     draw_inflow_size,
     formation_goals,
     formation_offsets,
+    gaze_subgroups,
     group_speed,
     hex_lattice,
     placement_ok,
@@ -59,7 +60,7 @@ class CrowdSimulator:
         self.book = GroupBook(self.config.groups.max_size)
         self.n_spawned = 0
         self.n_exited = 0
-        self._index_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._index_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def reset(self, seed: int | None = None) -> CrowdState:
         """Start a new crowd. The same seed and config give the same run, bit for bit."""
@@ -214,7 +215,7 @@ class CrowdSimulator:
         (same formulas; used by tests). Fluctuations are added by the caller.
         """
         s, cfg = self.slots, self.config
-        idx, labels = self._active_index()
+        idx, labels, gaze = self._active_index()
         pos, vel = s.pos[idx], s.vel[idx]
         if reference:
             v_des = forces.desired_velocity(pos, s.goal[idx], s.speed[idx], cfg.social)
@@ -231,21 +232,22 @@ class CrowdSimulator:
         i, j = neighbor_pairs(pos_all, cfg.social.cutoff_m)
         if not reference:
             acc = kernels.social_acc(pos_all, rad_all, e_all, i, j, len(idx), vel, v_des, self.scenario.walls,
-                                     labels, self._params)
+                                     labels, gaze, self._params)
             return acc, idx
         acc = forces.pedestrian_acc(pos_all, rad_all, e_all, i, j, cfg.social)[: len(idx)]
         acc += forces.driving_acc(vel, v_des, cfg.social)
         acc += forces.wall_acc(pos, radius, self.scenario.walls, cfg.social)
         inner = (i < len(idx)) & (j < len(idx))
-        acc += forces.group_acc(pos, vel, e, labels, i[inner], j[inner], cfg.group_forces)
+        acc += forces.group_acc(pos, vel, e, labels, i[inner], j[inner], cfg.group_forces, gaze)
         return acc, idx
 
-    def _active_index(self) -> tuple[np.ndarray, np.ndarray]:
-        """Active slots (n,) and their dense group labels (n,); cached while membership is unchanged
-        (it only changes between recording steps: spawns, exits and group events)."""
+    def _active_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Active slots (n,), their dense group labels (n,) and gaze sub-group labels (n,); cached while
+        membership is unchanged (it only changes between recording steps: spawns, exits and group events)."""
         if self._index_cache is None:
             idx = np.flatnonzero(self.slots.active)
-            self._index_cache = (idx, self.slots.dense_labels(idx))
+            dense = self.slots.dense_labels(idx)
+            self._index_cache = (idx, dense, gaze_subgroups(self.slots.pos[idx], self.slots.goal[idx], dense))
         return self._index_cache
 
     def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray,

@@ -161,3 +161,22 @@ def test_formations_change_with_density_from_abreast_to_v_and_river():
     assert share(sparse, "abreast") > max(share(sparse, "V"), share(sparse, "river")), sparse
     assert share(dense, "abreast") < share(sparse, "abreast") - 0.05, (sparse, dense)
     assert share(dense, "river") > share(sparse, "river") + 0.15, (sparse, dense)
+
+
+def test_groups_above_three_look_at_their_own_row_and_the_front_row_is_not_held_back():
+    from crowdsim import forces
+    from crowdsim.config import GroupForceParams
+    from crowdsim.groups import gaze_subgroups
+
+    pos = np.array([[1.0, 0.4], [1.0, -0.4], [0.0, 0.4], [0.0, -0.4], [5.0, 5.0], [5.0, 5.8]])
+    goal = pos + np.array([10.0, 0.0])
+    label = np.array([0, 0, 0, 0, 1, 1])
+    sub = gaze_subgroups(pos, goal, label)
+    assert sub[0] == sub[1] != sub[2] == sub[3] and sub[4] == sub[5] and len(set(sub.tolist())) == 3
+    vel = np.tile([1.2, 0.0], (6, 1))
+    e = vel / 1.2
+    none = np.zeros(0, np.int64)
+    whole = forces.group_acc(pos, vel, e, label, none, none, GroupForceParams())
+    rows = forces.group_acc(pos, vel, e, label, none, none, GroupForceParams(), gaze_label=sub)
+    assert whole[0, 0] < -0.5 and whole[1, 0] < -0.5  # looking round at the row behind brakes the front row
+    assert rows[0, 0] == pytest.approx(0.0, abs=1e-9) and rows[1, 0] == pytest.approx(0.0, abs=1e-9)
