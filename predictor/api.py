@@ -13,6 +13,7 @@ import torch
 
 from predictor.batch import relative
 from predictor.checkpoint import load_model
+from predictor.device import model_device
 from predictor.gaussian import mean_cov
 from predictor.model import GPGraph
 from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
@@ -85,11 +86,12 @@ class GPGraphPredictor:
     ) -> Prediction:
         """Sample ``n_samples`` futures from ``history`` (8, N, 2), m. Same rng state, same samples."""
         h, rng = _check_inputs(history, n_samples, rng)
-        obs_abs = torch.as_tensor(h, dtype=torch.float32)[None]
-        obs_rel = torch.as_tensor(relative(h), dtype=torch.float32)[None]
-        out = self.model(obs_abs, obs_rel, torch.ones(1, h.shape[1], dtype=torch.bool))
-        mu, cov = (a[0].double().numpy() for a in mean_cov(out.raw))
-        groups = out.groups[0].numpy().astype(np.int64)
+        device = model_device(self.model)  # the model's forward runs there; sampling stays on the CPU
+        obs_abs = torch.as_tensor(h, dtype=torch.float32, device=device)[None]
+        obs_rel = torch.as_tensor(relative(h), dtype=torch.float32, device=device)[None]
+        out = self.model(obs_abs, obs_rel, torch.ones(1, h.shape[1], dtype=torch.bool, device=device))
+        mu, cov = (a[0].double().numpy() for a in mean_cov(out.raw.cpu()))
+        groups = out.groups[0].cpu().numpy().astype(np.int64)
         z = draw_latents(self.spec, n_samples, PRED_LEN, groups, rng)
         with np.errstate(invalid="ignore", over="ignore"):
             samples = sample_positions(mu, cholesky_2x2(cov), z, h[-1])

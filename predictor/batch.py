@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
@@ -34,6 +34,14 @@ class Batch:
     @property
     def counts(self) -> list[int]:
         return self.node_mask.sum(dim=1).tolist()
+
+    def to(self, device: torch.device | str) -> Batch:
+        """The same batch with every tensor on ``device`` (``self`` when they are already there)."""
+        device = torch.device(device)
+        if self.node_mask.device == device:
+            return self
+        move = lambda a: None if a is None else a.to(device)  # noqa: E731
+        return Batch(*(move(getattr(self, f.name)) for f in fields(self)))
 
 
 def relative(traj: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:

@@ -2,7 +2,9 @@
 
 Our format is a plain dict, loadable with ``torch.load(..., weights_only=True)``:
 ``{"format": FORMAT, "config": GPGraphConfig.to_dict(), "state_dict": {...}, "meta": {...}}``.
-Nothing is ever unpickled without ``weights_only=True``.
+Nothing is ever unpickled without ``weights_only=True``. Files always hold CPU tensors, whatever device the
+model trained on (``save_atomic`` moves them), and reading maps everything to the CPU first; callers move the
+model to their device afterwards.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import os
 import re
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import torch
 from safetensors import SafetensorError, safe_open
@@ -136,8 +139,23 @@ def load_model(
     return model.eval(), meta
 
 
+def to_cpu(obj: Any) -> Any:
+    """``obj`` with every tensor inside (nested dicts, lists, tuples) detached and moved to the CPU."""
+    if isinstance(obj, torch.Tensor):
+        return obj.detach().cpu()
+    if isinstance(obj, dict):
+        return {k: to_cpu(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [to_cpu(v) for v in obj]
+    if isinstance(obj, tuple):
+        return tuple(to_cpu(v) for v in obj)
+    return obj
+
+
 def save_atomic(obj: dict, path: str | Path) -> None:
-    """Write ``obj`` with torch.save to a temporary file in the same folder, then rename over ``path``."""
+    """Write ``obj`` (its tensors moved to the CPU) with torch.save to a temporary file in the same folder,
+    then rename over ``path``."""
+    obj = to_cpu(obj)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
@@ -161,7 +179,7 @@ def save_model(model: GPGraph, path: str | Path, meta: dict | None = None) -> No
 
 def export_packaged(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
     """Write a model as ``.safetensors`` with its config and ``meta`` as JSON metadata (for shipping)."""
-    state = {k: v.detach().contiguous() for k, v in model.state_dict().items()}
+    state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     metadata = {"format": FORMAT, "config": json.dumps(model.config.to_dict()), "meta": json.dumps(meta or {})}
     save_file(state, str(path), metadata=metadata)
     os.chmod(path, 0o644)

@@ -2,7 +2,8 @@
 
 Examples::
 
-    gpgraph train --data ../shared/datasets/eth_ucy/hotel --backbone stgcnn --out runs/hotel --threads 2
+    gpgraph train --data ../shared/datasets/eth_ucy/hotel --backbone stgcnn --out runs/hotel --threads 2 \
+        --eval-every 10
     gpgraph evaluate --checkpoint runs/hotel/best.pt --data ../shared/datasets/eth_ucy/hotel \
         --protocol iid --seed 0 --json hotel.json
     gpgraph evaluate --checkpoint ../shared/reference/gpgraph_sgcn/hotel/val_best.pth --backbone sgcn \
@@ -24,6 +25,7 @@ import torch
 
 from predictor.checkpoint import CheckpointError, load_model
 from predictor.data import DataFormatError
+from predictor.device import DEVICES, resolve_device
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.model import GPGraphConfig
 from predictor.sampling import PROTOCOLS
@@ -55,7 +57,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight)
     cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
                       bucket=args.bucket, max_pairs=args.max_pairs,
-                      seed=args.seed, model=model_cfg)
+                      seed=args.seed, eval_every=args.eval_every, model=model_cfg)
     train_w = _windows(args.data, "train")[: args.max_windows or None]
     val_w = _windows(args.data, "val")[: args.max_windows or None]
     labelled = sum(w.group_id is not None for w in train_w)
@@ -64,9 +66,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.bce_weight > 0 and labelled == 0:
         raise ValueError(f"--bce-weight {args.bce_weight} needs group labels (X.groups.txt or X.labels.tsv beside "
                          f"the trajectory files), and {split_folder(args.data, 'train')} has none")
-    summary = train(cfg, train_w, val_w, args.out, resume=args.resume, progress=not args.quiet)
+    summary = train(cfg, train_w, val_w, args.out, resume=args.resume, progress=not args.quiet, device=args.device)
+    if summary["val_ade"] is not None:
+        print(f"last validation ADE/FDE (iid, best of 20) {summary['val_ade']:.4f} / {summary['val_fde']:.4f} m")
     print(f"best validation loss {summary['best_val']:.4f}; {summary['seconds']:.1f} s; "
-          f"checkpoint {Path(args.out) / 'best.pt'}")
+          f"checkpoint {Path(args.out) / 'best.pt'} (kept by validation loss); log {Path(args.out) / 'log.csv'}")
     return 0
 
 
@@ -85,7 +89,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     windows = _windows(args.data, "test")
     cfg = EvalConfig(protocol=args.protocol, seed=args.seed, trials=args.trials, n_samples=args.samples,
                      pool_size=args.pool_size)
-    result = evaluate(model, windows, cfg)
+    result = evaluate(model.to(args.device), windows, cfg, progress=not args.quiet)
     result["checkpoint"] = str(args.checkpoint)
     result["grouping"] = model.config.grouping
     print(format_table(result))
@@ -104,6 +108,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     out = _check_output_file(args.out, ".npz")
     history = _load_history(args.history)
     model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping)
+    model = model.to(args.device)
     if args.sample_level:
         model.config = replace(model.config, sample_level=args.sample_level)
     pred = GPGraphPredictor(model).predict(history, n_samples=args.samples, rng=np.random.default_rng(args.seed))
@@ -164,6 +169,9 @@ def _load_history(path: Path) -> np.ndarray:
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    p.add_argument("--device", choices=DEVICES, default="cpu",
+                   help="where the model runs: auto = cuda when torch sees a GPU, else cpu (sampling stays on "
+                        "the CPU, checkpoints hold CPU tensors)")
     p.add_argument("--backbone", default=None, help="backbone name (sgcn, stgcnn)")
     p.add_argument("--grouping", default=None, choices=["exact", "official", "ratio"])
 
@@ -209,6 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--max-windows", type=int, default=0, help="use only the first N windows (smoke tests)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    t.add_argument("--eval-every", type=int, default=TrainConfig.eval_every,
+                   help="validation ADE/FDE (iid, best of 20, 1 trial, seed 0) at epochs 0, N, 2N, ... and the "
+                        "last, into log.csv columns val_ade,val_fde; 0: off (the checkpoint is kept by loss)")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
     e = sub.add_parser("evaluate", help="ADE/FDE/COL/TCC (+ PW/G-MITRE) on DATA/test")
@@ -222,6 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--pool-size", type=int, default=EvalConfig.pool_size,
                    help="KMeans latent sets precomputed for --protocol paper")
     e.add_argument("--json", type=Path, default=None)
+    e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=cmd_evaluate)
     r = sub.add_parser("predict", help="sample futures for an (8, N, 2) history saved with numpy")
     _common(r)
@@ -247,6 +259,11 @@ def main(argv: list[str] | None = None) -> int:
         print("gpgraph: error: --threads must be >= 1", file=sys.stderr)
         return 2
     torch.set_num_threads(args.threads)
+    try:
+        args.device = resolve_device(args.device)  # before anything is read or written
+    except ValueError as exc:
+        print(f"gpgraph: error: {exc}", file=sys.stderr)
+        return 2
     if args.command == "train" and args.backbone is None:
         args.backbone = "stgcnn"
     if args.command == "train" and args.grouping is None:

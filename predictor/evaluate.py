@@ -11,9 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from predictor import metrics
 from predictor.batch import collate
+from predictor.device import model_device
 from predictor.gaussian import mean_cov
 from predictor.model import GPGraph
 from predictor.sampling import (
@@ -55,32 +57,48 @@ class EvalConfig:
 
 @torch.no_grad()
 def step_distributions(model: GPGraph, windows: list[Window]) -> list[tuple[np.ndarray, ...]]:
-    """Per window: step means (12, n, 2), Cholesky factors (12, n, 2, 2), predicted groups (n,)."""
-    batch = collate(windows)
+    """Per window: step means (12, n, 2) and Cholesky factors (12, n, 2, 2), m/step; predicted groups (n,).
+
+    The forward pass runs on the model's device; its outputs come back to the CPU (float64) before anything
+    is sampled, so the draws do not depend on the device.
+    """
+    batch = collate(windows).to(model_device(model))
     out = model(batch.obs_abs, batch.obs_rel, batch.node_mask)
-    mu, cov = mean_cov(out.raw.double())
+    mu, cov = mean_cov(out.raw.cpu().double())
+    groups = out.groups.cpu()
     result = []
     for i, n in enumerate(batch.counts):
-        result.append((mu[i, :, :n].numpy(), cholesky_2x2(cov[i, :, :n].numpy()), out.groups[i, :n].numpy()))
+        result.append((mu[i, :, :n].numpy(), cholesky_2x2(cov[i, :, :n].numpy()), groups[i, :n].numpy()))
     return result
 
 
 def _score_window(
     mu: np.ndarray, chol: np.ndarray, groups: np.ndarray, w: Window, spec: LatentSpec,
-    cfg: EvalConfig, rng: np.random.Generator, pool: np.ndarray | None,
+    cfg: EvalConfig, rng: np.random.Generator, pool: np.ndarray | None, ade_fde_only: bool = False,
 ) -> np.ndarray:
-    """Sums over trials of (ade, fde, col, tcc), each (n,)."""
-    acc = np.zeros((4, w.n_peds))
+    """Sums over trials of (ade, fde, col, tcc), each (n,); only (ade, fde) with ``ade_fde_only``."""
+    acc = np.zeros((2 if ade_fde_only else 4, w.n_peds))
     for _ in range(cfg.trials):
         z = draw_latents(spec, cfg.n_samples, mu.shape[0], groups, rng, pool)
         samples = sample_positions(mu, chol, z, w.obs[-1])
         ade, fde = metrics.ade_fde(samples, w.pred)
-        acc += np.stack([ade, fde, metrics.col(samples), metrics.tcc(samples, w.pred)])
+        if ade_fde_only:
+            acc += np.stack([ade, fde])
+        else:
+            acc += np.stack([ade, fde, metrics.col(samples), metrics.tcc(samples, w.pred)])
     return acc
 
 
-def evaluate(model: GPGraph, windows: list[Window], cfg: EvalConfig | None = None) -> dict:
-    """Metrics dict with keys ade, fde, col, tcc (+ pw/gmitre when labelled) and the protocol details."""
+def evaluate(
+    model: GPGraph, windows: list[Window], cfg: EvalConfig | None = None, progress: bool = False,
+    ade_fde_only: bool = False,
+) -> dict:
+    """Metrics dict with keys ade, fde (m), col (%), tcc (+ pw/gmitre when labelled) and the protocol details.
+
+    The model runs on its own device (see ``step_distributions``); the latents come from one numpy Generator
+    seeded with ``cfg.seed``. ``progress`` shows a progress bar over the windows (on stderr);
+    ``ade_fde_only`` skips COL, TCC and the group metrics (same latent draws, so the same ADE/FDE).
+    """
     cfg = cfg or EvalConfig()
     if not windows:
         raise ValueError("no windows to evaluate")
@@ -88,17 +106,19 @@ def evaluate(model: GPGraph, windows: list[Window], cfg: EvalConfig | None = Non
     rng = np.random.default_rng(cfg.seed)
     spec = protocol_spec(cfg.protocol)
     pool = kmeans_pool(cfg.n_samples, cfg.pool_size, rng) if spec.kind == "kmeans" else None
-    totals, n_peds = np.zeros(4), 0
-    groups_scores = metrics.GroupScores() if has_labels(windows) else None
-    for start in range(0, len(windows), cfg.batch_size):
-        chunk = windows[start : start + cfg.batch_size]
-        for w, (mu, chol, groups) in zip(chunk, step_distributions(model, chunk), strict=True):
-            totals += _score_window(mu, chol, groups, w, spec, cfg, rng, pool).sum(axis=1)
-            n_peds += w.n_peds
-            if groups_scores is not None:
-                groups_scores.add(w.group_id, groups)
-    ade, fde, col, tcc = (totals / (n_peds * cfg.trials)).tolist()
-    result = {"ade": ade, "fde": fde, "col": col, "tcc": tcc}
+    keys = ("ade", "fde") if ade_fde_only else ("ade", "fde", "col", "tcc")
+    totals, n_peds = np.zeros(len(keys)), 0
+    groups_scores = metrics.GroupScores() if has_labels(windows) and not ade_fde_only else None
+    with tqdm(total=len(windows), desc=f"evaluate ({cfg.protocol})", unit="window", disable=not progress) as bar:
+        for start in range(0, len(windows), cfg.batch_size):
+            chunk = windows[start : start + cfg.batch_size]
+            for w, (mu, chol, groups) in zip(chunk, step_distributions(model, chunk), strict=True):
+                totals += _score_window(mu, chol, groups, w, spec, cfg, rng, pool, ade_fde_only).sum(axis=1)
+                n_peds += w.n_peds
+                if groups_scores is not None:
+                    groups_scores.add(w.group_id, groups)
+            bar.update(len(chunk))
+    result = dict(zip(keys, (totals / (n_peds * cfg.trials)).tolist(), strict=True))
     if groups_scores is not None:
         result.update(groups_scores.result())
     result.update(

@@ -1,8 +1,11 @@
 """Batched training: many padded windows per forward pass, NLL (+ optional GP-Graph+S BCE) loss.
 
 Checkpoints (written atomically, config inside): ``best.pt`` (lowest validation loss, what evaluation
-uses) and ``last.pt`` (model, optimiser, scheduler, epoch and rng state, for ``resume``). Losses go to
-``log.csv``.
+uses) and ``last.pt`` (model, optimiser, scheduler, epoch and rng state, for ``resume``), always with CPU
+tensors whatever the training device. One row per epoch goes to ``log.csv`` (``LOG_FIELDS``): losses, the
+learning rate, seconds, and every ``eval_every`` epochs the validation best-of-20 ADE/FDE (m) of the 'iid'
+protocol (one trial, seed ``VAL_EVAL_SEED``), empty on the other epochs. The checkpoint is still selected
+by the validation loss alone.
 """
 
 from __future__ import annotations
@@ -20,12 +23,15 @@ from tqdm import tqdm
 from predictor.backbones import BACKBONES
 from predictor.batch import Batch, collate
 from predictor.checkpoint import FORMAT, load_state, read_file, save_atomic, save_model
+from predictor.device import model_device
+from predictor.evaluate import EvalConfig, evaluate
 from predictor.gaussian import masked_nll
 from predictor.grouping import pair_mask
 from predictor.model import GPGraph, GPGraphConfig
 from predictor.windows import Window, augment_rotations
 
-LOG_FIELDS = ("epoch", "train_loss", "val_loss", "lr", "seconds")
+LOG_FIELDS = ("epoch", "train_loss", "val_loss", "lr", "seconds", "val_ade", "val_fde")
+VAL_EVAL_SEED = 0  # latent draws of the periodic validation ADE/FDE: the same every time, so epochs compare
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,8 @@ class TrainConfig:
             padded pair slots (B * N_max^2), accumulating gradients; 0 disables splitting; None uses the
             backbone's ``pair_budget`` (measured fastest on CPU).
         seed: seeds the numpy Generator (shuffling, rotations) and the initial weights.
+        eval_every: validation ADE/FDE at epochs 0, N, 2N, ... and the last (0: never); does not affect
+            which checkpoint is kept.
     """
 
     epochs: int = 300
@@ -58,11 +66,14 @@ class TrainConfig:
     bucket: int = 8
     max_pairs: int | None = None
     seed: int = 0
+    eval_every: int = 10
     model: GPGraphConfig = field(default_factory=GPGraphConfig)
 
     def __post_init__(self) -> None:
         if self.epochs < 1 or self.batch_size < 1 or self.bucket < 1 or (self.max_pairs or 0) < 0:
             raise ValueError("epochs, batch_size and bucket must be >= 1 and max_pairs >= 0")
+        if self.eval_every < 0:
+            raise ValueError(f"eval_every must be >= 0 (0: off), got {self.eval_every}")
         if self.lr <= 0 or self.weight_decay < 0 or self.clip_grad <= 0 or not 0 < self.gamma <= 1:
             raise ValueError("need lr > 0, weight_decay >= 0, clip_grad > 0 and 0 < gamma <= 1")
 
@@ -75,6 +86,10 @@ class TrainConfig:
         d = asdict(self)
         d["milestones"] = list(self.milestones)
         return d
+
+    def evaluates_at(self, epoch: int) -> bool:
+        """Whether epoch ``epoch`` (0-based, as in log.csv) computes the validation ADE/FDE."""
+        return self.eval_every > 0 and (epoch % self.eval_every == 0 or epoch == self.epochs - 1)
 
 
 def split_by_size(windows: list[Window], max_pairs: int) -> list[list[Window]]:
@@ -117,7 +132,7 @@ def group_bce(dist: Tensor, pi: Tensor, tau: float, batch: Batch) -> Tensor:
     """GP-Graph+S: BCE between sigmoid(-(D - pi) / tau) and same-group labels over real pairs i != j."""
     gt = batch.gt_groups
     n = dist.shape[1]
-    valid = pair_mask(batch.node_mask) & ~torch.eye(n, dtype=torch.bool)[None]
+    valid = pair_mask(batch.node_mask) & ~torch.eye(n, dtype=torch.bool, device=dist.device)[None]
     logits = -(dist - pi) / tau
     target = (gt[:, :, None] == gt[:, None, :]).to(dist.dtype)
     loss = torch.nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none")
@@ -125,7 +140,10 @@ def group_bce(dist: Tensor, pi: Tensor, tau: float, batch: Batch) -> Tensor:
 
 
 def batch_loss(model: GPGraph, batch: Batch) -> Tensor:
-    """Mean NLL over windows, plus bce_weight * BCE when the batch carries group labels."""
+    """Mean NLL over windows, plus bce_weight * BCE when the batch carries group labels.
+
+    ``batch`` must be on the model's device (``Batch.to``).
+    """
     out = model(batch.obs_abs, batch.obs_rel, batch.node_mask)
     loss = masked_nll(out.raw, batch.pred_rel, batch.node_mask)
     w = model.config.bce_weight
@@ -143,9 +161,10 @@ def eval_batches(windows: list[Window], batch_size: int, max_pairs: int) -> list
 
 @torch.no_grad()
 def validation_loss(model: GPGraph, batches: list[Batch]) -> float:
-    """Window-weighted mean loss over ``batches``."""
+    """Window-weighted mean loss over ``batches`` (moved to the model's device)."""
     model.eval()
-    total = sum(batch_loss(model, b).item() * b.node_mask.shape[0] for b in batches)
+    device = model_device(model)
+    total = sum(batch_loss(model, b.to(device)).item() * b.node_mask.shape[0] for b in batches)
     return total / sum(b.node_mask.shape[0] for b in batches)
 
 
@@ -158,16 +177,17 @@ def _optimiser(model: GPGraph, cfg: TrainConfig) -> tuple[torch.optim.Optimizer,
 def train_epoch(model: GPGraph, steps: list[list[Batch]], opt: torch.optim.Optimizer, clip: float) -> float:
     """One pass over optimiser steps (micro-batches accumulate, weighted by their window count).
 
-    Returns the window-weighted mean training loss.
+    Batches are moved to the model's device. Returns the window-weighted mean training loss.
     """
     model.train()
+    device = model_device(model)
     total, count = 0.0, 0
     for micro in steps:
         opt.zero_grad(set_to_none=True)
         n_step = sum(b.node_mask.shape[0] for b in micro)
         for b in micro:
             n = b.node_mask.shape[0]
-            loss = batch_loss(model, b)
+            loss = batch_loss(model, b.to(device))
             (loss * (n / n_step)).backward()
             total += loss.item() * n
         count += n_step
@@ -186,27 +206,55 @@ def _resume(out: Path, model: GPGraph, opt, sched, rng: np.random.Generator) -> 
     return int(state["epoch"]) + 1, float(state["best_val"])
 
 
+def validation_ade_fde(model: GPGraph, windows: list[Window]) -> tuple[float, float]:
+    """Best-of-20 ADE and FDE (m) of the 'iid' protocol, one trial, seed ``VAL_EVAL_SEED`` (deterministic)."""
+    res = evaluate(model, windows, EvalConfig(protocol="iid", seed=VAL_EVAL_SEED, trials=1, n_samples=20),
+                   ade_fde_only=True)
+    return res["ade"], res["fde"]
+
+
+def _start_log(path: Path, fresh: bool) -> None:
+    """Write the header of a new ``log.csv``; on resume, upgrade a log with fewer columns (an older version's)
+    to ``LOG_FIELDS``, its old rows padded with empty cells."""
+    if fresh or not path.is_file():
+        path.write_text(",".join(LOG_FIELDS) + "\n")
+        return
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if rows and tuple(rows[0]) != LOG_FIELDS:
+        width = len(LOG_FIELDS)
+        tmp = path.with_name(f".{path.name}.part")
+        with tmp.open("w", newline="") as f:
+            csv.writer(f).writerows([list(LOG_FIELDS)] + [r + [""] * (width - len(r)) for r in rows[1:]])
+        tmp.replace(path)
+
+
 def train(
     cfg: TrainConfig, train_windows: list[Window], val_windows: list[Window], out: str | Path,
-    resume: bool = False, progress: bool = True,
+    resume: bool = False, progress: bool = True, device: torch.device | str = "cpu",
 ) -> dict:
-    """Train, keeping ``best.pt`` by validation loss; returns a summary dict (losses, seconds)."""
+    """Train on ``device``, keeping ``best.pt`` by validation loss; returns a summary dict.
+
+    The initial weights are drawn on the CPU (so every device starts from the same model) and then moved.
+    Summary keys: best_val (loss), epochs, seconds, val_ade / val_fde (m, of the last evaluated epoch; None
+    when ``cfg.eval_every`` is 0).
+    """
     if not train_windows or not val_windows:
         raise ValueError("training needs at least one train and one val window (>= 2 pedestrians each)")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)  # initial weights only; nothing random runs inside the model
-    model = GPGraph(cfg.model)
+    model = GPGraph(cfg.model).to(device)
     opt, sched = _optimiser(model, cfg)
     start, best = (0, float("inf"))
     if resume and (out / "last.pt").is_file():
         start, best = _resume(out, model, opt, sched, rng)
-    val_batches = eval_batches(val_windows, cfg.batch_size, cfg.pair_budget)
+    val_batches = [b.to(device) for b in eval_batches(val_windows, cfg.batch_size, cfg.pair_budget)]
     log_path = out / "log.csv"
-    if start == 0 or not log_path.is_file():
-        log_path.write_text(",".join(LOG_FIELDS) + "\n")
+    _start_log(log_path, fresh=start == 0)
     t0 = time.perf_counter()
+    ade = fde = None
     bar = tqdm(range(start, cfg.epochs), disable=not progress, desc="train", unit="epoch")
     for epoch in bar:
         tic = time.perf_counter()
@@ -214,18 +262,25 @@ def train(
         steps = make_batches(windows, cfg.batch_size, cfg.bucket, rng, cfg.pair_budget)
         tr = train_epoch(model, steps, opt, cfg.clip_grad)
         va = validation_loss(model, val_batches)
+        evaluated = cfg.evaluates_at(epoch)
+        if evaluated:
+            ade, fde = validation_ade_fde(model, val_windows)
         lr = opt.param_groups[0]["lr"]
         sched.step()
         if va < best:
             best = va
             save_model(model, out / "best.pt", meta={"epoch": epoch, "val_loss": va, "train": cfg.to_dict()})
+        metrics = [f"{ade:.6f}", f"{fde:.6f}"] if evaluated else ["", ""]
         with log_path.open("a", newline="") as f:
-            csv.writer(f).writerow([epoch, f"{tr:.6f}", f"{va:.6f}", f"{lr:.6g}", f"{time.perf_counter() - tic:.2f}"])
+            csv.writer(f).writerow([epoch, f"{tr:.6f}", f"{va:.6f}", f"{lr:.6g}", f"{time.perf_counter() - tic:.2f}",
+                                    *metrics])
         save_atomic(
             {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
              "optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
              "best_val": best, "rng": rng.bit_generator.state, "meta": {"train": cfg.to_dict()}},
             out / "last.pt",
         )
-        bar.set_postfix(train=f"{tr:.3f}", val=f"{va:.3f}", best=f"{best:.3f}")
-    return {"best_val": best, "epochs": cfg.epochs, "seconds": time.perf_counter() - t0}
+        shown = {} if ade is None else {"ade": f"{ade:.3f}", "fde": f"{fde:.3f}"}  # the latest evaluation
+        bar.set_postfix(train=f"{tr:.3f}", val=f"{va:.3f}", best=f"{best:.3f}", **shown)
+    return {"best_val": best, "epochs": cfg.epochs, "seconds": time.perf_counter() - t0, "val_ade": ade,
+            "val_fde": fde}
