@@ -52,7 +52,7 @@ benchmark: setup
 	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v2 --data ../shared/datasets/eth_ucy
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
-# (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~40 min on one CPU core. Not run in CI. See RESULTS.md.
+# (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~25 min on one CPU core. Not run in CI. See RESULTS.md.
 synthetic-predictor: setup
 	bash scripts/synthetic_predictor.sh all
 

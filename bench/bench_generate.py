@@ -33,20 +33,16 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import logging
 import os
 import platform
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from crowdsim import cli
 from crowdsim.config import SimConfig
 from crowdsim.export import table_files, write_files
 from crowdsim.generate import RunSpec, default_name, generate, metadata, simulate
-from crowdsim.sim import CrowdSimulator
 
 DURATION_S = 120.0
 PSF_DT_S = 0.4  # PySocialForce's fixed step
@@ -113,40 +109,14 @@ def time_cli(n: int, seed: int, repeats: int) -> list[float]:
 
 
 # ------------------------------------------------------------------------------------------ PySocialForce
-def _import_psf():
-    """Import pysocialforce in a temporary folder: it writes ./file.log and turns on DEBUG logging."""
-    cwd = os.getcwd()
-    with tempfile.TemporaryDirectory() as tmp:
-        os.chdir(tmp)
-        try:
-            import pysocialforce as psf
-        finally:
-            os.chdir(cwd)
-    logging.getLogger().setLevel(logging.WARNING)
-    for name in list(logging.root.manager.loggerDict):
-        logging.getLogger(name).setLevel(logging.WARNING)
-    return psf
 
 
 def time_pysocialforce(config: SimConfig, seed: int, steps: int) -> float | None:
     """CPU seconds of `steps` PySocialForce steps from crowdsim's initial state of the recording (None if
-    pysocialforce is not installed)."""
-    try:
-        psf = _import_psf()
-    except ImportError:
-        return None
-    sim = CrowdSimulator(config)
-    s = sim.reset(seed)
-    act = s.active
-    state = np.concatenate([s.pos[act], np.zeros((act.sum(), 2)), s.goal[act]], axis=1)
-    groups = [list(np.flatnonzero(s.group_id[act] == g)) for g in np.unique(s.group_id[act])]
-    obstacles = [[a[0], b[0], a[1], b[1]] for a, b in sim.scenario.walls]
-    with tempfile.TemporaryDirectory() as tmp, contextlib.chdir(tmp):
-        ref = psf.Simulator(state, groups=groups, obstacles=obstacles)
-        ref.step(1)  # numba compilation outside the timing
-        t0 = time.process_time()
-        ref.step(steps)
-        return time.process_time() - t0
+    pysocialforce is not installed); the same harness as bench_crowdsim.py."""
+    from bench_crowdsim import psf_cpu_seconds  # the sibling script (this folder is on sys.path when run)
+
+    return psf_cpu_seconds(config, seed, steps)
 
 
 # ------------------------------------------------------------------------------------------------- report
