@@ -26,12 +26,6 @@ def draw_group_sizes(rng: np.random.Generator, n_total: int, cfg: GroupConfig) -
     return sizes
 
 
-def draw_group_size(rng: np.random.Generator, cfg: GroupConfig, limit: int) -> int:
-    """One group size from cfg's distribution, at most `limit`."""
-    probs = np.asarray(cfg.size_probabilities())
-    return min(int(rng.choice(len(probs), p=probs)) + 1, limit)
-
-
 def draw_inflow_size(rng: np.random.Generator, cfg: GroupConfig, mean_stay_s: np.ndarray, limit: int) -> int:
     """The size of the next group to enter a continuous scene, at most `limit`.
 
