@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crowdsim.config import SimConfig
-from crowdsim.groups import GroupBook, formation_goals, placement_ok
+from crowdsim.groups import GroupBook, formation_goals, placement_ok, step_probability
 from crowdsim.scenarios import Scenario
 from crowdsim.state import Slots
 
@@ -24,7 +24,7 @@ APPROACH_LIMIT_S = 30.0  # a group that has not reached its places by then start
 @dataclass
 class Stop:
     """A group's stop: o-space centre (2,) m, the destination (2,) m to walk on to afterwards, the standing
-    time s, and when standing began (None while walking there)."""
+    time s, and since_s: when the group chose the stop, then (once `standing`) when it began to stand."""
 
     centre: np.ndarray
     destination: np.ndarray
@@ -68,12 +68,12 @@ def update(slots: Slots, book: GroupBook, rng: np.random.Generator, config: SimC
     """One recording step of behaviours: end stops that are over, part and join at stops, start new stops."""
     cfg = config.behaviour
     for label in list(book.stops):
-        _advance_stop(slots, book, rng, config, int(label), time_s)
+        _advance_stop(slots, book, config, int(label), time_s)
     if cfg.part_rate_hz > 0 or cfg.join_rate_hz > 0:
         for label in [lb for lb, st in book.stops.items() if st.standing]:
             _meet_and_part(slots, book, rng, config, scenario, int(label), time_s)
     if cfg.stop_rate_hz > 0 and (scenario.stop_areas or scenario.pois):
-        p_stop = 1.0 - np.exp(-cfg.stop_rate_hz * config.record_dt_s)
+        p_stop = step_probability(cfg.stop_rate_hz, config.record_dt_s)
         act = np.flatnonzero(slots.active)
         for label in np.unique(slots.label[act]):
             if int(label) not in book.stops and rng.random() < p_stop:
@@ -106,8 +106,9 @@ def _start_stop(slots: Slots, book: GroupBook, rng: np.random.Generator, config:
     slots.goal[members] = assign_places(slots.pos[members], places, centre)
 
 
-def _advance_stop(slots: Slots, book: GroupBook, rng: np.random.Generator, config: SimConfig, label: int,
-                  time_s: float) -> None:
+def _advance_stop(slots: Slots, book: GroupBook, config: SimConfig, label: int, time_s: float) -> None:
+    """Start standing once every member is at its place (or the approach took too long); end the stop when
+    its time is up, sending the group on to its destination in formation."""
     stop = book.stops[label]
     members = _members(slots, label)
     if len(members) == 0:
@@ -135,7 +136,7 @@ def _meet_and_part(slots: Slots, book: GroupBook, rng: np.random.Generator, conf
                    scenario: Scenario, label: int, time_s: float) -> None:
     cfg, stop, dt = config.behaviour, book.stops[label], config.record_dt_s
     members = _members(slots, label)
-    p_part = 1.0 - np.exp(-cfg.part_rate_hz * dt)
+    p_part = step_probability(cfg.part_rate_hz, dt)
     if len(members) >= 2 and rng.random() < 1.0 - (1.0 - p_part) ** len(members):
         slot = int(rng.choice(members))
         slots.label[slot] = book.new_label()
@@ -143,7 +144,7 @@ def _meet_and_part(slots: Slots, book: GroupBook, rng: np.random.Generator, conf
         slots.goal[slot] = scenario.new_destination(rng, slots.pos[slot])
         _regroup(slots, config, stop, members[members != slot], rng)
         return
-    p_join = 1.0 - np.exp(-cfg.join_rate_hz * dt)
+    p_join = step_probability(cfg.join_rate_hz, dt)
     if len(members) >= config.groups.max_size or rng.random() >= p_join:
         return
     act = np.flatnonzero(slots.active)

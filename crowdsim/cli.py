@@ -72,6 +72,7 @@ class _DefaultFloat(float):
     """See `_DefaultInt`."""
 
 
+DEFAULT_SCENARIOS = "corridor,crossing,plaza,circle_crossing"  # of `crowdsim dataset` without --preset
 PRESET_SETS = ("pedestrians", "leave_rate", "merge_rate", "option")  # flags a --preset draws per recording
 
 
@@ -124,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common(g, 120.0)
     d = sub.add_parser("dataset", help="several scenarios x seeds into train/val/test folders")
     d.add_argument("--scenarios", default=None,
-                   help="comma-separated names (default: the preset's, or corridor,crossing,plaza,circle_crossing)")
+                   help=f"comma-separated names (default: the preset's, or {DEFAULT_SCENARIOS})")
     d.add_argument("--preset", default=None, choices=sorted(PRESETS),
                    help="draw each recording's parameters from this training preset (crowdsim presets lists "
                         "them); it sets --pedestrians, --leave-rate, --merge-rate and --option")
@@ -223,7 +224,7 @@ def _dataset(args: argparse.Namespace) -> int:
     mixed = [f"--{d.replace('_', '-')}" for d in PRESET_SETS if args.preset and _given(args, d)]
     if mixed:
         raise ValueError(f"--preset {args.preset} draws {', '.join(mixed)} per recording; leave them out")
-    default = ",".join(get_preset(args.preset).scenarios) if args.preset else "corridor,crossing,plaza,circle_crossing"
+    default = ",".join(get_preset(args.preset).scenarios) if args.preset else DEFAULT_SCENARIOS
     scenarios = [s.strip() for s in (args.scenarios if args.scenarios is not None else default).split(",")
                  if s.strip()]
     if not scenarios:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from crowdsim.config import SimConfig
-from crowdsim.groups import GroupBook, formation_goals, group_speed
+from crowdsim.groups import GroupBook, formation_goals, group_speed, step_probability
 from crowdsim.scenarios import Scenario
 from crowdsim.state import Slots
 
@@ -22,8 +22,8 @@ def apply_events(slots: Slots, book: GroupBook, rng: np.random.Generator, config
     if cfg.leave_rate_hz <= 0 and cfg.merge_rate_hz <= 0:
         return
     dt = config.record_dt_s
-    p_leave = 1.0 - np.exp(-cfg.leave_rate_hz * dt)
-    p_merge = 1.0 - np.exp(-cfg.merge_rate_hz * dt)
+    p_leave = step_probability(cfg.leave_rate_hz, dt)
+    p_merge = step_probability(cfg.merge_rate_hz, dt)
     for label in np.unique(slots.label[slots.active]):
         u_leave, u_merge = rng.random(2)
         if int(label) in book.stops:  # stopping and standing groups meet and part in crowdsim.behaviours

@@ -26,6 +26,11 @@ def draw_group_sizes(rng: np.random.Generator, n_total: int, cfg: GroupConfig) -
     return sizes
 
 
+def step_probability(rate_hz: float, dt_s: float) -> float:
+    """Probability that a Poisson process of rate_hz (1/s) fires at least once in dt_s seconds."""
+    return float(1.0 - np.exp(-rate_hz * dt_s))
+
+
 def draw_inflow_size(rng: np.random.Generator, cfg: GroupConfig, mean_stay_s: np.ndarray, limit: int) -> int:
     """The size of the next group to enter a continuous scene, at most `limit`.
 
