@@ -3,6 +3,7 @@
     crowdnav evaluate --policy mpc-gpgraph mpc-cv --scenario plaza --episodes 50 --seed 0 --out out/eval
     crowdnav benchmark --suite crowdnav-v1 --policy mpc-gpgraph mpc-cv mpc-none social-force --out out/bench
     crowdnav demo [--out out/demo]
+    crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --warm-start bc --out out/train/cc5
     crowdnav policies | scenarios | suites
 
 Misuse (an unknown name, a bad value, an unwritable output path, a flag the chosen policy ignores) prints one
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdsim.cli import OneLineParser, show_defaults  # the CLI conventions, shared with crowdsim
+from envs import train as train_module
 from envs.cli_options import add_backend_options, add_policy_options, check_backend, default_workers, policy_configs
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 
@@ -86,6 +88,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--workers", type=int, default=default_workers())
     d.add_argument("--predictor", default=None, metavar="NAME", help="instead of the shipped GP-Graph")
     d.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    t = sub.add_parser("train", help="train a PPO agent (envs.train; needs the 'rl' extra)",
+                       description=train_module.__doc__.splitlines()[0] + " (python -m envs.train --help: the details)")
+    train_module.add_arguments(t)
 
     for name, text in (("policies", "list the policy names"), ("scenarios", "list the scenario names"),
                        ("suites", "list the benchmark suites and their cells")):
@@ -224,10 +230,16 @@ def _list(command: str) -> int:
     return 0
 
 
+def _train(args: argparse.Namespace) -> int:
+    cfg, out, resume = train_module.config_from_args(args)
+    out.mkdir(parents=True, exist_ok=True)
+    return train_module.train(cfg, out, resume, args.demos)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    run = {"evaluate": _evaluate, "benchmark": _benchmark, "demo": _demo}.get(args.command)
+    run = {"evaluate": _evaluate, "benchmark": _benchmark, "demo": _demo, "train": _train}.get(args.command)
     try:
         return run(args) if run is not None else _list(args.command)
     except (UsageError, ValueError, OSError) as exc:

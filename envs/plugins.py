@@ -9,33 +9,24 @@ Protocols (also in the README):
                 `samples` (K, pred_len, N, 2) m and `group_id` (N,); optional attributes step_s, obs_len, pred_len
                 (default 0.4 s, 8, 12). A predictor factory is called with no arguments.
 
-SB3 agents load without unpickling Python objects from the file: the entries SB3 would unpickle are replaced
-(spaces by the env's, schedules by constants) and the weights load with `weights_only=True`; an agent whose
-settings need unpickling (e.g. a custom activation class in policy_kwargs) is refused with a clear error.
+SB3 agents load without unpickling Python objects from the file (`envs.sb3_io`): pickled settings are replaced
+(spaces by the env's, schedules by constants, policy_kwargs rebuilt with allow-listed classes), the weights load
+with `weights_only=True`, and an agent trained on another observation layout is refused with the mismatch named.
 """
 
 from __future__ import annotations
 
 import importlib
-import json
 import re
-import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from envs.sb3_io import SB3_ALGOS, load_agent
+
 PLUGIN_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 SB3_PREFIX = "sb3:"
-SB3_ALGOS = ("PPO", "A2C", "SAC", "TD3", "DDPG")
-# Pickled entries of an SB3 file and what replaces them: the env's spaces, SB3's default policy for a Dict
-# observation and its default buffers (None), constant schedules (only used when training) and no training state.
-_SAFE_REPLACEMENTS: dict[str, Any] = {
-    "policy_class": None, "rollout_buffer_class": None, "replay_buffer_class": None,
-    "lr_schedule": lambda _: 0.0, "learning_rate": 0.0, "clip_range": lambda _: 0.0, "clip_range_vf": None,
-    "exploration_schedule": lambda _: 0.0, "_last_obs": None, "_last_episode_starts": None,
-    "_last_original_obs": None, "_episode_storage": None,
-}
 
 
 def is_plugin(spec: str) -> bool:
@@ -76,30 +67,13 @@ class SB3Policy:
 
     def __init__(self, spec: str, env: Any, deterministic: bool = True, threads: int = 1) -> None:
         algo, path = parse_sb3(spec)
-        if not path.is_file():
-            raise ValueError(f"{spec!r}: no such file {path}")
-        try:
-            with zipfile.ZipFile(path) as z:
-                data = json.loads(z.read("data"))
-        except (zipfile.BadZipFile, KeyError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path}: not a stable-baselines3 model file ({exc})") from exc
-        pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
-        unsafe = [k for k in pickled if k not in _SAFE_REPLACEMENTS and k not in ("observation_space", "action_space")]
-        if unsafe:
-            raise ValueError(f"{path}: settings {unsafe} would need unpickling Python objects; refusing to load")
-        import stable_baselines3
-
         from predictor import set_threads  # torch stays behind the predictor package
 
         set_threads(threads)
-        cls = getattr(stable_baselines3, algo)
-        custom = {k: _SAFE_REPLACEMENTS[k] for k in pickled if k in _SAFE_REPLACEMENTS}
-        custom.update(observation_space=env.observation_space, action_space=env.action_space,
-                      policy_class=cls.policy_aliases["MultiInputPolicy"])
         try:
-            self.model = cls.load(path, custom_objects=custom, device="cpu")
-        except (ValueError, RuntimeError, KeyError) as exc:
-            raise ValueError(f"{path}: cannot load as {algo} for this env ({exc})") from exc
+            self.model = load_agent(path, algo, env)
+        except ValueError as exc:
+            raise ValueError(f"{spec!r}: {exc}") from exc
         self.name, self.deterministic = f"sb3:{path.stem}", deterministic
         try:  # a model trained on another observation layout fails here, not mid-episode
             self.model.predict(env.observation_space.sample(), deterministic=True)

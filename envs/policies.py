@@ -7,6 +7,8 @@ Registry names:
     mpc-none      MPC with pedestrians frozen where they stand (no prediction), no groups
     social-force  reactive social-force robot (every env step)
     random        uniform random actions (a baseline and a benchmark load)
+    ppo-crowdnav  the shipped PPO agent (`envs/agents/ppo-crowdnav.zip`, trained with `envs.train`: circle
+                  crossing, 5 pedestrians who do not see the robot; RESULTS.md "RL baseline")
 
 Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -222,18 +225,35 @@ class RandomPolicy:
         return self.rng.uniform(-1.0, 1.0, 2).astype(np.float32)
 
 
-def _planner(name: str, planner_cls: type, every: int | None = None) -> Callable[[PolicyConfig, MPCConfig], Policy]:
-    return lambda cfg, mpc: PlannerPolicy(name, planner_cls(mpc), singleton_prediction,
-                                          every or cfg.replan_every_steps)
+Factory = Callable[[PolicyConfig, MPCConfig, CrowdNavEnv], Policy]
+AGENTS_DIR = Path(__file__).parent / "agents"
 
 
-POLICIES: dict[str, Callable[[PolicyConfig, MPCConfig], Policy]] = {
-    "mpc-gpgraph": lambda cfg, mpc: GPGraphPolicy(mpc, cfg.predictor, cfg.n_samples, cfg.threads,
-                                                  cfg.replan_every_steps),
+def _planner(name: str, planner_cls: type, every: int | None = None) -> Factory:
+    return lambda cfg, mpc, env: PlannerPolicy(name, planner_cls(mpc), singleton_prediction,
+                                               every or cfg.replan_every_steps)
+
+
+def _agent(name: str) -> Factory:
+    """A packaged SB3 agent (envs/agents/NAME.zip), loaded like `sb3:PATH.zip` and renamed."""
+    def build(cfg: PolicyConfig, mpc: MPCConfig, env: CrowdNavEnv) -> Policy:
+        path = AGENTS_DIR / f"{name}.zip"
+        if not path.is_file():
+            raise ValueError(f"policy {name!r}: its packaged agent {path} is missing")
+        policy = SB3Policy(f"{SB3_PREFIX}{path}", env, cfg.deterministic, cfg.threads)
+        policy.name = name
+        return policy
+    return build
+
+
+POLICIES: dict[str, Factory] = {
+    "mpc-gpgraph": lambda cfg, mpc, env: GPGraphPolicy(mpc, cfg.predictor, cfg.n_samples, cfg.threads,
+                                                       cfg.replan_every_steps),
     "mpc-cv": _planner("mpc-cv", ConstantVelocityMPC),
     "mpc-none": _planner("mpc-none", FrozenMPC),
     "social-force": _planner("social-force", SocialForcePlanner, every=1),
-    "random": lambda cfg, mpc: RandomPolicy(),
+    "random": lambda cfg, mpc, env: RandomPolicy(),
+    "ppo-crowdnav": _agent("ppo-crowdnav"),
 }
 
 
@@ -249,4 +269,4 @@ def make_policy(spec: str | PolicyConfig, env: CrowdNavEnv) -> Policy:
         return SB3Policy(cfg.name, env, cfg.deterministic, cfg.threads)
     if is_plugin(cfg.name):
         return load_factory(cfg.name)(cfg, env)
-    return POLICIES[cfg.name](cfg, replace(cfg.mpc, robot=env.config.robot))
+    return POLICIES[cfg.name](cfg, replace(cfg.mpc, robot=env.config.robot), env)

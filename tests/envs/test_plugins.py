@@ -156,10 +156,15 @@ def test_sb3_agent_loads_safely_and_acts_like_the_saved_model(tmp_path):
         obs, *_ = env.step(action)
     import torch
 
+    tanh = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, device="cpu",
+               policy_kwargs={"activation_fn": torch.nn.Tanh, "net_arch": [16]})
+    tanh.save(tmp_path / "tanh.zip")  # an allow-listed class in policy_kwargs is rebuilt without unpickling
+    assert np.allclose(make_policy(PolicyConfig(f"sb3:{tmp_path / 'tanh.zip'}"), env).act(obs, env),
+                       tanh.predict(obs, deterministic=True)[0], atol=1e-6)
     custom = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, device="cpu",
-                 policy_kwargs={"activation_fn": torch.nn.Tanh})
+                 policy_kwargs={"activation_fn": torch.nn.Hardswish})
     custom.save(tmp_path / "custom.zip")
-    with pytest.raises(ValueError, match="unpickling"):
+    with pytest.raises(ValueError, match=r"unpickling.*allow-list"):
         make_policy(PolicyConfig(f"sb3:{tmp_path / 'custom.zip'}"), env)
     (tmp_path / "junk.zip").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="not a stable-baselines3 model"):

@@ -1,0 +1,167 @@
+"""Warm start from the MPC: demonstrations of a harness policy, behaviour cloning into an SB3 policy, DAgger.
+
+`collect_demos` runs a registry policy (by default `mpc-gpgraph`) for whole episodes with fixed seeds and keeps
+every step's observation, the action it took and the discounted return that followed. `behaviour_clone` fits
+an SB3 actor-critic to them: the actor by maximum likelihood of the expert's actions (its Gaussian's mean
+learns the action; its log-std is reset afterwards so PPO still explores), the critic by regression on the
+returns, so that the first PPO updates do not tear the cloned actor down with a random critic.
+DAgger (Ross et al. 2011) then rolls the cloned policy out, has the expert label the states the learner itself
+reaches (`collect_demos(learner=...)`), and clones again on the aggregate, which fixes the compounding errors of
+plain cloning: a learner that drifts off the expert's states has never been shown how to recover.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from envs.config import CrowdNavConfig
+from envs.env import CrowdNavEnv
+from envs.policies import PolicyConfig, make_policy
+
+
+@dataclass
+class Demos:
+    """Demonstrations: obs {key: (S, ...)} float32, actions (S, 2) in [-1, 1], returns (S,) discounted,
+    episode_outcome (E,) strings, episode_seed (E,)."""
+
+    obs: dict[str, np.ndarray]
+    actions: np.ndarray
+    returns: np.ndarray
+    episode_outcome: np.ndarray
+    episode_seed: np.ndarray
+
+    @property
+    def success_rate(self) -> float:
+        return float(np.mean(self.episode_outcome == "success")) if len(self.episode_outcome) else 0.0
+
+    def save(self, path: str | Path) -> None:
+        np.savez_compressed(path, actions=self.actions, returns=self.returns, episode_outcome=self.episode_outcome,
+                            episode_seed=self.episode_seed, **{f"obs.{k}": v for k, v in self.obs.items()})
+
+    @classmethod
+    def load(cls, path: str | Path) -> Demos:
+        """Load demos saved by `save` (no pickles); ValueError when the file is not one."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                obs = {k[4:]: z[k] for k in z.files if k.startswith("obs.")}
+                return cls(obs, z["actions"], z["returns"], z["episode_outcome"], z["episode_seed"])
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{path}: not a demonstrations file ({exc})") from exc
+
+
+def _episode(env: CrowdNavEnv, expert: Any, seed: int, gamma: float, learner: Any = None,
+             beta: float = 1.0, rng: np.random.Generator | None = None) -> tuple[dict, np.ndarray, np.ndarray, str]:
+    """One episode labelled by the expert. Each step executes the expert's action with probability beta, else
+    the learner's (an SB3 policy, deterministic); the expert's action is always the label."""
+    obs, _ = env.reset(seed=seed)
+    expert.reset(env, seed)
+    observations, actions, rewards, done, info = [], [], [], False, {}
+    while not done:
+        label = np.asarray(expert.act(obs, env), np.float32)
+        action = label
+        if learner is not None and (rng is None or rng.random() >= beta):
+            action = np.asarray(learner.predict(obs, deterministic=True)[0], np.float32).reshape(2)
+        observations.append(obs)
+        actions.append(label)
+        obs, reward, terminated, truncated, info = env.step(action)
+        rewards.append(reward)
+        done = terminated or truncated
+    returns = np.zeros(len(rewards))
+    acc = 0.0
+    for i in range(len(rewards) - 1, -1, -1):
+        acc = rewards[i] + gamma * acc
+        returns[i] = acc
+    stacked = {k: np.stack([o[k] for o in observations]) for k in observations[0]}
+    return stacked, np.stack(actions), returns, info["episode_metrics"]["outcome"]
+
+
+def _chunk(args: tuple) -> list[tuple[dict, np.ndarray, np.ndarray, str]]:
+    from predictor import set_threads
+
+    set_threads(1)
+    config, policy, seeds, gamma, learner, beta = args
+    if learner is not None:  # (class, constructor kwargs, state dict) -> the SB3 policy in this process
+        cls, kwargs, state = learner
+        learner = cls(**kwargs)
+        learner.load_state_dict(state)
+        learner.set_training_mode(False)
+    env = CrowdNavEnv(config)
+    expert = make_policy(PolicyConfig(name=policy), env)
+    rng = np.random.default_rng(seeds[0])
+    return [_episode(env, expert, s, gamma, learner, beta, rng) for s in seeds]
+
+
+def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes: int = 60, seed: int = 0,
+                  gamma: float = 0.99, workers: int = 1, learner: Any = None, beta: float = 1.0) -> Demos:
+    """`episodes` episodes labelled by `policy` (seeds seed .. seed + episodes - 1) over `workers` processes.
+    With a `learner` (an SB3 policy), each step runs the learner's action with probability 1 - beta (DAgger);
+    `episode_outcome` is then the outcome of the executed (mixed) episode."""
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    seeds = list(range(seed, seed + episodes))
+    if learner is not None:  # sent to the workers as its constructor and detached weights
+        learner = (type(learner), learner._get_constructor_parameters(),
+                   {k: v.detach().clone() for k, v in learner.state_dict().items()})
+    chunks = [(config, policy, seeds[i::workers], gamma, learner, beta) for i in range(workers) if seeds[i::workers]]
+    if len(chunks) == 1:
+        parts = [_chunk(chunks[0])]
+    else:
+        ctx = multiprocessing.get_context("forkserver")
+        with ProcessPoolExecutor(len(chunks), mp_context=ctx) as pool:
+            parts = list(pool.map(_chunk, chunks))
+    order = sorted(((s, ep) for c, part in zip(chunks, parts, strict=True) for s, ep in zip(c[2], part, strict=True)),
+                   key=lambda x: x[0])
+    eps = [ep for _, ep in order]
+    obs = {k: np.concatenate([e[0][k] for e in eps]) for k in eps[0][0]}
+    return Demos(obs, np.concatenate([e[1] for e in eps]).astype(np.float32),
+                 np.concatenate([e[2] for e in eps]).astype(np.float32),
+                 np.array([e[3] for e in eps]), np.array([s for s, _ in order]))
+
+
+def concat(a: Demos, b: Demos) -> Demos:
+    """The union of two demonstration sets (DAgger's aggregate)."""
+    return Demos({k: np.concatenate([a.obs[k], b.obs[k]]) for k in a.obs}, np.concatenate([a.actions, b.actions]),
+                 np.concatenate([a.returns, b.returns]), np.concatenate([a.episode_outcome, b.episode_outcome]),
+                 np.concatenate([a.episode_seed, b.episode_seed]))
+
+
+def behaviour_clone(model: Any, demos: Demos, epochs: int = 30, batch_size: int = 256, lr: float = 1e-3,
+                    value_coef: float = 0.5, reset_log_std: float | None = -0.5, seed: int = 0) -> list[float]:
+    """Fit `model.policy` (an SB3 ActorCriticPolicy) to the demos; returns the mean loss per epoch.
+
+    Loss per batch: -mean log-likelihood of the expert actions + value_coef x MSE(value, return). Afterwards
+    the log-std is set to `reset_log_std` (None keeps the fitted one). Non-finite loss raises RuntimeError."""
+    import torch
+
+    policy = model.policy
+    gen = torch.Generator().manual_seed(seed)
+    obs = {k: torch.as_tensor(v) for k, v in demos.obs.items()}
+    actions, returns = torch.as_tensor(demos.actions), torch.as_tensor(demos.returns)
+    opt = torch.optim.Adam(policy.parameters(), lr=lr)
+    n, history = len(actions), []
+    policy.set_training_mode(True)
+    for _ in range(epochs):
+        perm, total = torch.randperm(n, generator=gen), 0.0
+        for start in range(0, n, batch_size):
+            idx = perm[start:start + batch_size]
+            values, log_prob, _ = policy.evaluate_actions({k: v[idx] for k, v in obs.items()}, actions[idx])
+            loss = -log_prob.mean() + value_coef * torch.nn.functional.mse_loss(values.flatten(), returns[idx])
+            if not torch.isfinite(loss):
+                raise RuntimeError("behaviour cloning diverged (non-finite loss)")
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(policy.parameters(), 0.5)
+            opt.step()
+            total += float(loss.detach()) * len(idx)
+        history.append(total / n)
+    policy.set_training_mode(False)
+    if reset_log_std is not None and hasattr(policy, "log_std"):
+        with torch.no_grad():
+            policy.log_std.fill_(reset_log_std)
+    return history

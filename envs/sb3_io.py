@@ -1,0 +1,162 @@
+"""Stable-baselines3 agent files without unpickling: save with the observation layout, load safely, check layouts.
+
+An SB3 `.zip` holds a JSON "data" entry (some settings as base64 pickles plus readable copies of their fields)
+and the weights as `.pth` files. Here nothing pickled is ever loaded:
+- settings that would be unpickled are replaced: the spaces by the env's, schedules by constants, and
+  `policy_kwargs` rebuilt from its readable fields, with classes only from an allow-list (`ALLOWED_CLASSES`);
+- the weights load with `torch.load(weights_only=True)` (SB3's loader);
+- agents saved here carry `crowdnav.json` (the env's observation signature, `envs.obs_layout.signature`, and
+  training metadata); an agent whose signature differs from the env's is refused with the mismatch named. For
+  other SB3 files the keys and shapes are read from the readable copy of the observation space.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import re
+import zipfile
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+from envs.atomic import write_atomic
+from envs.config import CrowdNavConfig
+from envs.obs_layout import mismatches, signature
+
+LAYOUT_ENTRY = "crowdnav.json"
+SB3_ALGOS = ("PPO", "A2C", "SAC", "TD3", "DDPG")
+# Entries SB3 would unpickle that are safe to replace: SB3's default policy for a Dict observation and its
+# default buffers (None), constant schedules (only used when training) and no training state.
+_SAFE_REPLACEMENTS: dict[str, Any] = {
+    "policy_class": None, "rollout_buffer_class": None, "replay_buffer_class": None,
+    "lr_schedule": lambda _: 0.0, "learning_rate": 0.0, "clip_range": lambda _: 0.0, "clip_range_vf": None,
+    "exploration_schedule": lambda _: 0.0, "_last_obs": None, "_last_episode_starts": None,
+    "_last_original_obs": None, "_episode_storage": None,
+}
+ALLOWED_CLASSES = {  # readable class names in policy_kwargs -> (module, attribute)
+    "<class 'envs.extractor.CrowdAttentionExtractor'>": ("envs.extractor", "CrowdAttentionExtractor"),
+    **{f"<class 'torch.nn.modules.activation.{n}'>": ("torch.nn", n) for n in ("ReLU", "Tanh", "ELU", "GELU", "SiLU")},
+    "<class 'torch.optim.adam.Adam'>": ("torch.optim", "Adam"),
+}
+_BOX_RE = re.compile(r"'(\w+)': Box\([^()]*?\((\d+(?:, \d+)*),?\), \w+\)")
+
+
+def read_data(path: Path) -> dict[str, Any]:
+    """The JSON "data" entry of an SB3 file; ValueError when the file is not one."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return json.loads(z.read("data"))
+    except (OSError, zipfile.BadZipFile, KeyError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not a stable-baselines3 model file ({exc})") from exc
+
+
+def read_layout(path: Path) -> dict[str, Any] | None:
+    """The `crowdnav.json` entry (signature and metadata) of an agent saved here, else None."""
+    with zipfile.ZipFile(path) as z:
+        if LAYOUT_ENTRY not in z.namelist():
+            return None
+        return json.loads(z.read(LAYOUT_ENTRY))
+
+
+def _class(name: str) -> Any:
+    import importlib
+
+    if name not in ALLOWED_CLASSES:
+        raise ValueError(f"class {name} is not on the allow-list of loadable classes")
+    module, attr = ALLOWED_CLASSES[name]
+    return getattr(importlib.import_module(module), attr)
+
+
+def _policy_kwargs(entry: dict[str, Any]) -> dict[str, Any]:
+    """policy_kwargs rebuilt from the readable fields of its pickled entry (classes from the allow-list)."""
+    out: dict[str, Any] = {}
+    for key, value in entry.items():
+        if key.startswith(":"):
+            continue
+        if isinstance(value, str) and value.startswith("<class '"):
+            out[key] = _class(value)
+        elif isinstance(value, str) and key in ("net_arch", "features_extractor_kwargs", "optimizer_kwargs"):
+            out[key] = ast.literal_eval(value)  # a literal that JSON could not hold (e.g. a tuple)
+        else:
+            out[key] = value
+    return out
+
+
+def custom_objects(data: dict[str, Any], path: Path) -> dict[str, Any]:
+    """Replacements for every pickled entry of `data`; ValueError when one cannot be replaced safely."""
+    pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
+    fresh = {"ep_info_buffer": deque(maxlen=100), "ep_success_buffer": deque(maxlen=100)}  # logging only
+    out = {k: _SAFE_REPLACEMENTS[k] if k in _SAFE_REPLACEMENTS else fresh[k] for k in pickled
+           if k in _SAFE_REPLACEMENTS or k in fresh}
+    unsafe = [k for k in pickled if k not in out and k not in ("observation_space", "action_space", "policy_kwargs")]
+    if unsafe:
+        raise ValueError(f"{path}: settings {unsafe} would need unpickling Python objects; refusing to load")
+    if "policy_kwargs" in pickled:
+        try:
+            out["policy_kwargs"] = _policy_kwargs(data["policy_kwargs"])
+        except (ValueError, SyntaxError) as exc:
+            raise ValueError(f"{path}: policy_kwargs cannot be rebuilt without unpickling ({exc})") from exc
+    return out
+
+
+def saved_signature(data: dict[str, Any], path: Path) -> dict[str, Any] | None:
+    """The observation signature of an SB3 file: its `crowdnav.json`, else keys/shapes parsed from the readable
+    copy of its observation space (None when neither is there)."""
+    layout = read_layout(path)
+    if layout is not None:
+        return layout["signature"]
+    spaces_text = data.get("observation_space", {}).get("spaces")
+    if not isinstance(spaces_text, str):
+        return None
+    keys = {m.group(1): [int(x) for x in m.group(2).split(",")] for m in _BOX_RE.finditer(spaces_text)}
+    return {"keys": keys} if keys else None
+
+
+def check_layout(data: dict[str, Any], path: Path, config: CrowdNavConfig) -> None:
+    """ValueError naming every difference between the agent's observation and this env's."""
+    saved = saved_signature(data, path)
+    if saved is None:
+        return
+    diff = mismatches(saved, signature(config))
+    if diff:
+        raise ValueError(f"{path}: the agent was trained on another observation layout: {'; '.join(diff)}")
+
+
+def load_agent(path: Path, algo: str, env: Any) -> Any:
+    """The SB3 model in `path` for this env (its spaces), loaded without unpickling; ValueError otherwise."""
+    if not path.is_file():
+        raise ValueError(f"no such file {path}")
+    data = read_data(path)
+    check_layout(data, path, env.config)
+    custom = custom_objects(data, path)
+    import stable_baselines3
+
+    cls = getattr(stable_baselines3, algo)
+    custom.update(observation_space=env.observation_space, action_space=env.action_space,
+                  policy_class=cls.policy_aliases["MultiInputPolicy"])
+    try:
+        return cls.load(path, custom_objects=custom, device="cpu")
+    except (ValueError, RuntimeError, KeyError, TypeError, zipfile.BadZipFile, EOFError) as exc:
+        raise ValueError(f"{path}: cannot load as {algo} for this env ({str(exc).splitlines()[0]})") from exc
+
+
+def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
+    """Weights (and optimiser state) of `path` into `model` (weights_only); ValueError on a layout mismatch."""
+    check_layout(read_data(path), path, config)
+    try:
+        model.set_parameters(str(path), exact_match=True, device="cpu")
+    except (ValueError, RuntimeError, KeyError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: cannot load its weights ({str(exc).splitlines()[0]})") from exc
+
+
+def save_agent(model: Any, path: Path, config: CrowdNavConfig, meta: dict[str, Any] | None = None) -> None:
+    """Save atomically (a reader sees the old file or the complete new one) with `crowdnav.json` inside."""
+    layout = {"signature": signature(config), "meta": meta or {}}
+
+    def write(tmp: str) -> None:
+        model.save(tmp)
+        with zipfile.ZipFile(tmp, "a") as z:
+            z.writestr(LAYOUT_ENTRY, json.dumps(layout, indent=1))
+
+    write_atomic(Path(path), write)

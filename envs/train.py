@@ -1,0 +1,303 @@
+"""Train a PPO agent on `crowdnav/CrowdNav-v0`: `python -m envs.train` or `crowdnav train`.
+
+    crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --steps 1000000 --out out/train/cc5
+    crowdnav train --config run.toml --warm-start bc          # flags override the file's values
+    crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint
+
+It reads top to bottom: the settings (`TrainConfig`), the vectorised envs, the SB3 PPO model with the
+set-aware extractor (`envs.extractor`), an optional warm start by behaviour cloning of the MPC
+(`envs.imitation`), then `learn` with one callback (`envs.train_monitor`) that prints steps/s and an ETA,
+evaluates the deterministic agent with the harness metrics every `eval_every_steps` on seeds it never trained
+on, and saves checkpoints atomically. Out folder: config.json, progress.csv + tb/ (SB3's logger: CSV and
+TensorBoard), eval.csv, demos.npz, checkpoints/{latest,best}.zip (+ state.json), final.zip.
+Training resets draw episodes from the streams of seeds seed .. seed + envs - 1; evaluation uses explicit
+seeds eval_seed .. eval_seed + eval_episodes - 1 (default 100000+), so it never replays a training episode.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from envs.atomic import write_json_atomic
+from envs.config import CrowdNavConfig, ObservationConfig, RewardWeights
+
+WARM_STARTS = ("none", "bc", "dagger")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a run depends on (saved as config.json; defaults run). Steps are env steps."""
+
+    scenario: str = "circle_crossing"
+    pedestrians: int = 5
+    invisible: bool = True            # pedestrians do not see the robot (CrowdNav's invisible setting)
+    time_limit_s: float = 40.0
+    max_pedestrians: int = 20         # P rows in the observation
+    groups: bool = True               # the extractor pools rows by group id
+    predictions: bool = False         # predicted futures in the observation and the extractor
+    rewards: tuple[tuple[str, float], ...] = ()  # RewardWeights overrides, e.g. (("collision", -20.0),)
+    total_steps: int = 1_000_000
+    seed: int = 0
+    envs: int = 8                     # parallel envs in the rollout
+    workers: int = 1                  # processes stepping them (1: all in this process)
+    n_steps: int = 256                # rollout length per env
+    batch_size: int = 256
+    n_epochs: int = 10
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    log_std_init: float = -0.5
+    warm_start: str = "none"          # "bc": behaviour cloning of demo_policy before PPO; "dagger": then DAgger
+    demo_policy: str = "mpc-gpgraph"
+    demo_episodes: int = 60
+    demo_seed: int = 200_000
+    bc_epochs: int = 30
+    dagger_rounds: int = 3            # DAgger: roll the learner out, expert labels, clone again on the aggregate
+    dagger_episodes: int = 30         # learner episodes per DAgger round
+    eval_every_steps: int = 100_000
+    eval_episodes: int = 30
+    eval_seed: int = 100_000
+    checkpoint_every_steps: int = 50_000
+    threads: int = 1                  # torch threads in the learner process
+
+    def __post_init__(self) -> None:
+        ints = ("pedestrians", "max_pedestrians", "total_steps", "envs", "workers", "n_steps", "batch_size",
+                "n_epochs", "demo_episodes", "bc_epochs", "dagger_rounds", "dagger_episodes", "eval_every_steps",
+                "eval_episodes", "checkpoint_every_steps", "threads")
+        for name in ints:
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        if self.warm_start not in WARM_STARTS:
+            raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
+        if self.workers > self.envs:
+            raise ValueError(f"workers ({self.workers}) must not exceed envs ({self.envs})")
+        if not (0 < self.gamma <= 1 and 0 < self.gae_lambda <= 1 and self.learning_rate > 0 and self.clip_range > 0):
+            raise ValueError("gamma and gae_lambda must be in (0, 1], learning_rate and clip_range > 0")
+        self.env_config().sim_config()  # validates the scenario, crowd size (against the group sizes), rewards
+
+    def env_config(self) -> CrowdNavConfig:
+        """The env every training and evaluation episode runs in."""
+        names = {"progress": "progress_per_m", "success": "success", "collision": "collision",
+                 "discomfort": "discomfort_per_s", "group_intrusion": "group_intrusion_per_s", "time": "time_per_s"}
+        unknown = [k for k, _ in self.rewards if k not in names]
+        if unknown:
+            raise ValueError(f"unknown reward term(s) {unknown}; valid: {', '.join(names)}")
+        weights = replace(RewardWeights(), **{names[k]: float(v) for k, v in self.rewards})
+        obs = ObservationConfig(max_pedestrians=self.max_pedestrians, predictions=self.predictions)
+        return CrowdNavConfig(scenario=self.scenario, n_pedestrians=self.pedestrians,
+                              robot_visible=not self.invisible, time_limit_s=self.time_limit_s, rewards=weights,
+                              observation=obs)
+
+    def to_json(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["rewards"] = {k: v for k, v in self.rewards}
+        return d
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> TrainConfig:
+        """A config from JSON/TOML data; unknown keys are an error."""
+        fields = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - fields)
+        if unknown:
+            raise ValueError(f"unknown setting(s) {unknown}; valid: {', '.join(sorted(fields))}")
+        data = dict(data)
+        if "rewards" in data:
+            data["rewards"] = tuple((str(k), float(v)) for k, v in dict(data["rewards"]).items())
+        return cls(**data)
+
+
+# ------------------------------------------------------------------------------------------ the run
+def make_vec_env(cfg: TrainConfig) -> Any:
+    """`cfg.envs` monitored envs stepped in this process (workers 1) or in `cfg.envs` subprocesses."""
+    from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    from envs.env import CrowdNavEnv
+
+    env_cfg = cfg.env_config()
+    vec_cls = DummyVecEnv if cfg.workers == 1 else SubprocVecEnv
+    kwargs = {"start_method": "forkserver"} if cfg.workers > 1 else None
+    return sb3_make_vec_env(CrowdNavEnv, n_envs=cfg.envs, seed=cfg.seed, vec_env_cls=vec_cls,
+                            env_kwargs={"config": env_cfg}, vec_env_kwargs=kwargs)
+
+
+def make_model(cfg: TrainConfig, vec_env: Any, out: Path) -> Any:
+    from stable_baselines3 import PPO
+
+    from envs.extractor import CrowdAttentionExtractor
+
+    policy_kwargs = {"features_extractor_class": CrowdAttentionExtractor,
+                     "features_extractor_kwargs": {"use_groups": cfg.groups, "use_predictions": cfg.predictions},
+                     "net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": cfg.log_std_init}
+    return PPO("MultiInputPolicy", vec_env, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+               learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
+               ent_coef=cfg.ent_coef, policy_kwargs=policy_kwargs, seed=cfg.seed, device="cpu", verbose=0)
+
+
+def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None) -> dict[str, Any]:
+    """Behaviour cloning of the demo policy (demos from `demos_path`, or collected and saved to out/demos.npz),
+    then for "dagger" `dagger_rounds` rounds of learner roll-outs labelled by the expert (seeds after the
+    demos' own) and cloning on the aggregate (saved to out/dagger.npz)."""
+    from envs.imitation import Demos, behaviour_clone, collect_demos, concat
+
+    start, workers = time.perf_counter(), max(2, cfg.workers)
+    if demos_path is not None:
+        demos = Demos.load(demos_path)
+    else:
+        print(f"collecting {cfg.demo_episodes} {cfg.demo_policy} demonstrations ...", flush=True)
+        demos = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.demo_episodes, cfg.demo_seed, cfg.gamma,
+                              workers=workers)
+        demos.save(out / "demos.npz")
+    info: dict[str, Any] = {"demo_steps": len(demos.actions), "demo_episodes": len(demos.episode_seed),
+                            "demo_success_rate": demos.success_rate}
+    losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, reset_log_std=cfg.log_std_init, seed=cfg.seed)
+    print(f"behaviour cloning: {len(demos.actions)} demo steps ({demos.success_rate:.2f} expert success), "
+          f"loss {losses[0]:.3f} -> {losses[-1]:.3f}", flush=True)
+    rounds = []
+    for r in range(cfg.dagger_rounds if cfg.warm_start == "dagger" else 0):
+        seed = cfg.demo_seed + cfg.demo_episodes + r * cfg.dagger_episodes
+        new = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.dagger_episodes, seed, cfg.gamma, workers,
+                            learner=model.policy, beta=0.0)
+        demos = concat(demos, new)
+        losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, reset_log_std=cfg.log_std_init, seed=cfg.seed + r)
+        rounds.append({"learner_success": new.success_rate, "steps": len(demos.actions), "loss": losses[-1]})
+        print(f"DAgger round {r + 1}: the learner succeeded in {new.success_rate:.2f} of its {cfg.dagger_episodes} "
+              f"episodes; {len(demos.actions)} labelled steps, loss {losses[-1]:.3f}", flush=True)
+    if rounds:
+        demos.save(out / "dagger.npz")
+    info.update(bc_loss_last=losses[-1], dagger=rounds, warm_start_s=time.perf_counter() - start)
+    return info
+
+
+def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | None = None) -> int:
+    """Run (or resume) training into `out`; 0 on completion, 1 when training diverged."""
+    from stable_baselines3.common.logger import configure
+
+    from envs.train_monitor import Diverged, TrainMonitor, load_checkpoint, tensorboard_available
+    from predictor import set_threads
+
+    set_threads(cfg.threads)
+    out.mkdir(parents=True, exist_ok=True)
+    vec_env = make_vec_env(cfg)
+    try:
+        model = make_model(cfg, vec_env, out)
+        formats = ["csv", "tensorboard"] if tensorboard_available() else ["csv"]
+        model.set_logger(configure(str(out / "tb"), formats))
+        monitor = TrainMonitor(cfg, out)
+        if resume:
+            load_checkpoint(model, monitor, out)
+        else:
+            write_json_atomic(out / "config.json", cfg.to_json())
+            if cfg.warm_start != "none":
+                monitor.note_warm_start(warm_start(cfg, model, out, demos_path))
+            monitor.evaluate(model)  # the curve starts at step 0 (the cloned or the random policy)
+        remaining = cfg.total_steps - model.num_timesteps
+        if remaining > 0:
+            model.learn(total_timesteps=remaining, callback=monitor, reset_num_timesteps=False)
+        monitor.finish(model)
+        return 0
+    except Diverged as exc:
+        print(f"crowdnav train: {exc}", file=sys.stderr)
+        return 1
+    except ValueError as exc:  # e.g. torch's Normal refusing a NaN mean mid-rollout
+        if "nan" not in str(exc).lower():
+            raise
+        print(f"crowdnav train: training diverged ({str(exc).splitlines()[0]}); the last good checkpoint is "
+              f"{out / 'checkpoints' / 'latest.zip'}", file=sys.stderr)
+        return 1
+    finally:
+        vec_env.close()
+
+
+# ------------------------------------------------------------------------------------------ command line
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", type=Path, default=None, metavar="TOML", help="settings file (TrainConfig fields)")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR", help="run folder (default out/train/<scenario>)")
+    p.add_argument("--resume", type=Path, default=None, metavar="DIR", help="resume the run in DIR")
+    p.add_argument("--demos", type=Path, default=None, metavar="NPZ", help="reuse demonstrations for --warm-start bc")
+    flags = {"scenario": str, "pedestrians": int, "time_limit_s": float, "max_pedestrians": int,
+             "total_steps": int, "seed": int, "envs": int, "workers": int, "n_steps": int, "batch_size": int,
+             "n_epochs": int, "learning_rate": float, "gamma": float, "ent_coef": float, "log_std_init": float,
+             "warm_start": str, "demo_policy": str, "demo_episodes": int, "bc_epochs": int, "dagger_rounds": int,
+             "dagger_episodes": int,
+             "eval_every_steps": int, "eval_episodes": int, "eval_seed": int, "checkpoint_every_steps": int,
+             "threads": int}
+    defaults = TrainConfig()
+    for name, typ in flags.items():
+        p.add_argument("--" + name.replace("_", "-"), type=typ, default=argparse.SUPPRESS, dest=name,
+                       help=f"(default: {getattr(defaults, name)})")
+    p.add_argument("--steps", type=int, default=argparse.SUPPRESS, dest="total_steps",
+                   help=f"total env steps, alias of --total-steps (default: {defaults.total_steps})")
+    for name in ("invisible", "groups", "predictions"):
+        p.add_argument(f"--{name}", action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, dest=name,
+                       help=f"(default: {getattr(defaults, name)})")
+    p.add_argument("--reward", action="append", default=None, metavar="TERM=WEIGHT",
+                   help="reward weight override (repeatable): progress, success, collision, discomfort, "
+                        "group_intrusion, time")
+
+
+def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]:
+    """(config, out folder, resume) from the parsed flags; ValueError on misuse."""
+    data: dict[str, Any] = {}
+    if args.resume is not None:
+        if args.config is not None or args.out is not None:
+            raise ValueError("--resume DIR takes its settings from DIR/config.json; drop --config/--out")
+        path = args.resume / "config.json"
+        if not path.is_file() or not (args.resume / "checkpoints" / "latest.zip").is_file():
+            raise ValueError(f"nothing to resume in {args.resume} (needs config.json and checkpoints/latest.zip)")
+        data = json.loads(path.read_text())
+    elif args.config is not None:
+        try:
+            data = tomllib.loads(args.config.read_text())
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise ValueError(f"--config {args.config}: {exc}") from exc
+    fields = {f.name for f in dataclasses.fields(TrainConfig)} - {"rewards"}
+    given = {k: v for k, v in vars(args).items() if k in fields}
+    if args.resume is not None and set(given) - {"total_steps"}:
+        raise ValueError(f"--resume keeps the run's settings; only --steps may change (got {sorted(given)})")
+    data.update(given)
+    if args.reward:
+        rewards = dict(data.get("rewards", {}))
+        for item in args.reward:
+            key, sep, value = item.partition("=")
+            if not sep:
+                raise ValueError(f"--reward {item!r}: expected TERM=WEIGHT")
+            rewards[key] = float(value)
+        data["rewards"] = rewards
+    cfg = TrainConfig.from_json(data)
+    if args.demos is not None and cfg.warm_start == "none":
+        raise ValueError("--demos is used only with --warm-start bc or dagger")
+    out = args.resume or args.out or Path("out/train") / cfg.scenario
+    if args.resume is None and (out / "checkpoints" / "latest.zip").exists():
+        raise ValueError(f"{out} already holds a run; use --resume {out} or another --out")
+    return cfg, out, args.resume is not None
+
+
+def main(argv: list[str] | None = None) -> int:
+    from crowdsim.cli import OneLineParser
+
+    parser = OneLineParser(prog="crowdnav train", description=__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        cfg, out, resume = config_from_args(args)
+        out.mkdir(parents=True, exist_ok=True)
+    except (ValueError, OSError) as exc:
+        print(f"crowdnav train: error: {exc}", file=sys.stderr)
+        return 2
+    return train(cfg, out, resume, args.demos)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

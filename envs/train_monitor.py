@@ -1,0 +1,179 @@
+"""The training callback of `envs.train`: progress with steps/s and ETA, periodic evaluation with the harness
+metrics, atomic checkpoints, resume, and a stop (keeping the last good checkpoint) when training diverges."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from envs.atomic import write_json_atomic
+from envs.env import CrowdNavEnv
+from envs.rollout import run_episode
+from envs.sb3_io import load_parameters, save_agent
+
+EVAL_FIELDS = ("steps", "wall_s", "success", "collision", "timeout", "mean_return", "time_to_goal_s",
+               "intrusion", "min_distance_m")
+
+
+class Diverged(RuntimeError):
+    """Training produced non-finite weights or losses."""
+
+
+def tensorboard_available() -> bool:
+    return importlib.util.find_spec("tensorboard") is not None
+
+
+class ModelPolicy:
+    """A model being trained, as a harness policy (deterministic actions)."""
+
+    def __init__(self, model: Any, name: str = "ppo") -> None:
+        self.model, self.name = model, name
+
+    def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
+        pass
+
+    def act(self, obs: dict[str, np.ndarray], env: CrowdNavEnv) -> np.ndarray:
+        action, _ = self.model.predict(obs, deterministic=True)
+        return np.asarray(action, np.float32).reshape(2)
+
+
+def finite_parameters(model: Any) -> bool:
+    import torch
+
+    return all(bool(torch.isfinite(p).all()) for p in model.policy.parameters())
+
+
+class TrainMonitor(BaseCallback):
+    """Prints progress after every rollout, evaluates every `eval_every_steps`, checkpoints every
+    `checkpoint_every_steps` (only finite weights are ever saved), stops with `Diverged` otherwise."""
+
+    def __init__(self, cfg: Any, out: Path) -> None:
+        super().__init__()
+        self.cfg, self.out = cfg, out
+        self.env_config = cfg.env_config()
+        self.eval_env = CrowdNavEnv(self.env_config)
+        self.wall_before = 0.0  # wall seconds of earlier sessions (resume)
+        self.t0 = time.perf_counter()
+        self.steps0 = 0
+        self.next_eval = cfg.eval_every_steps
+        self.next_ckpt = cfg.checkpoint_every_steps
+        self.best_success = -1.0
+        self.extra: dict[str, Any] = {}
+
+    # --------------------------------------------------------------------------------------- SB3 hooks
+    def _on_training_start(self) -> None:
+        self.t0, self.steps0 = time.perf_counter(), self.model.num_timesteps
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:  # after each PPO update (and before the first rollout)
+        if not finite_parameters(self.model):
+            raise Diverged(f"training diverged at step {self.model.num_timesteps} (non-finite weights); the last good "
+                           f"checkpoint is {self.out / 'checkpoints' / 'latest.zip'}")
+        steps = self.model.num_timesteps
+        if steps >= self.next_ckpt:
+            self.checkpoint()
+            self.next_ckpt = (steps // self.cfg.checkpoint_every_steps + 1) * self.cfg.checkpoint_every_steps
+        if steps >= self.next_eval:
+            self.evaluate(self.model)
+            self.next_eval = (steps // self.cfg.eval_every_steps + 1) * self.cfg.eval_every_steps
+
+    def _on_rollout_end(self) -> None:
+        steps, total = self.model.num_timesteps, self.cfg.total_steps
+        elapsed = time.perf_counter() - self.t0
+        rate = (steps - self.steps0) / max(elapsed, 1e-9)
+        eta = (total - steps) / rate if rate > 0 else float("inf")
+        eps = list(self.model.ep_info_buffer)
+        ret = np.mean([e["r"] for e in eps]) if eps else float("nan")
+        succ = self.model.ep_success_buffer
+        rate_s = f"{np.mean(succ):.2f}" if len(succ) else "-"
+        print(f"{steps:>9}/{total} steps  {rate:6.0f} steps/s  ETA {_hms(eta)}  return {ret:7.2f}  "
+              f"success(last {len(succ)}) {rate_s}", flush=True)
+
+    # ------------------------------------------------------------------------------------ evaluation
+    def evaluate(self, model: Any) -> dict[str, float]:
+        """Deterministic episodes on the eval seeds, harness metrics; appends a row to eval.csv."""
+        policy = ModelPolicy(model)
+        seeds = range(self.cfg.eval_seed, self.cfg.eval_seed + self.cfg.eval_episodes)
+        res = [run_episode(self.env_config, "", s, env=self.eval_env, policy=policy) for s in seeds]
+        m = [r.metrics for r in res]
+        succ = [x for x in m if x["success"]]
+        row = {"steps": model.num_timesteps, "wall_s": round(self.wall_s, 1),
+               "success": np.mean([x["success"] for x in m]), "collision": np.mean([x["collision"] for x in m]),
+               "timeout": np.mean([x["timeout"] for x in m]), "mean_return": np.mean([r.ret for r in res]),
+               "time_to_goal_s": np.mean([x["time_to_goal_s"] for x in succ]) if succ else float("nan"),
+               "intrusion": np.mean([x["group_intrusion"] for x in m]),
+               "min_distance_m": np.mean([min(x["min_distance_m"], 99.0) for x in m])}
+        path = self.out / "eval.csv"
+        new = not path.exists()
+        with path.open("a", newline="") as f:
+            w = csv.DictWriter(f, EVAL_FIELDS)
+            if new:
+                w.writeheader()
+            w.writerow({k: (round(float(v), 4) if isinstance(v, float | np.floating) else v) for k, v in row.items()})
+        print(f"eval @ {row['steps']}: success {row['success']:.2f}  collision {row['collision']:.2f}  "
+              f"timeout {row['timeout']:.2f}  return {row['mean_return']:.2f}  ({self.cfg.eval_episodes} episodes, "
+              f"seeds {seeds.start}..{seeds.stop - 1})", flush=True)
+        if row["success"] > self.best_success and finite_parameters(model):
+            self.best_success = float(row["success"])
+            save_agent(model, self.out / "checkpoints" / "best.zip", self.env_config, self._meta(model))
+        return row
+
+    # ----------------------------------------------------------------------------------- checkpoints
+    @property
+    def wall_s(self) -> float:
+        return self.wall_before + time.perf_counter() - self.t0
+
+    def note_warm_start(self, info: dict[str, Any]) -> None:
+        self.extra["warm_start"] = info
+        self.wall_before += info["warm_start_s"]
+
+    def _meta(self, model: Any) -> dict[str, Any]:
+        return {"steps": int(model.num_timesteps), "wall_s": round(self.wall_s, 1), "train_config": self.cfg.to_json(),
+                **self.extra}
+
+    def checkpoint(self) -> None:
+        meta = self._meta(self.model)
+        save_agent(self.model, self.out / "checkpoints" / "latest.zip", self.env_config, meta)
+        write_json_atomic(self.out / "checkpoints" / "state.json",
+                          {**meta, "best_success": self.best_success, "next_eval": self.next_eval})
+
+    def finish(self, model: Any) -> None:
+        self.model = model
+        self.checkpoint()
+        if model.num_timesteps > 0 and (self.out / "eval.csv").exists():
+            last = list(csv.DictReader((self.out / "eval.csv").open()))[-1]
+            if int(last["steps"]) < model.num_timesteps:
+                self.evaluate(model)
+        save_agent(model, self.out / "final.zip", self.env_config, self._meta(model))
+        print(f"done: {model.num_timesteps} steps in {_hms(self.wall_s)}; agent {self.out / 'final.zip'}, "
+              f"best {self.out / 'checkpoints' / 'best.zip'} (success {self.best_success:.2f})", flush=True)
+
+
+def load_checkpoint(model: Any, monitor: TrainMonitor, out: Path) -> None:
+    """Resume: the weights and optimiser state of out/checkpoints/latest.zip (no unpickling) and the counters."""
+    load_parameters(model, out / "checkpoints" / "latest.zip", monitor.env_config)
+    state = json.loads((out / "checkpoints" / "state.json").read_text())
+    model.num_timesteps = int(state["steps"])
+    monitor.wall_before = float(state["wall_s"])
+    monitor.best_success = float(state["best_success"])
+    monitor.next_eval = int(state["next_eval"])
+    monitor.extra = {k: v for k, v in state.items() if k == "warm_start"}
+    monitor.next_ckpt = (model.num_timesteps // monitor.cfg.checkpoint_every_steps + 1) \
+        * monitor.cfg.checkpoint_every_steps
+    print(f"resumed {out} at step {model.num_timesteps}", flush=True)
+
+
+def _hms(seconds: float) -> str:
+    if not np.isfinite(seconds):
+        return "--:--:--"
+    s = int(seconds)
+    return f"{s // 3600:d}:{s % 3600 // 60:02d}:{s % 60:02d}"

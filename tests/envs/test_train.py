@@ -1,0 +1,169 @@
+"""RL: the observation layout, the set-aware extractor, behaviour cloning, and the training entry point."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from envs import CrowdNavConfig, CrowdNavEnv, ObservationConfig
+from envs.cli import main
+from envs.extractor import CrowdAttentionExtractor
+from envs.obs_layout import field_names, flat_size, layout_table, unflatten
+from envs.train import TrainConfig, train
+
+TINY = TrainConfig(pedestrians=5, time_limit_s=6.0, total_steps=512, envs=2, n_steps=128, batch_size=64,
+                   n_epochs=2, eval_every_steps=256, eval_episodes=2, checkpoint_every_steps=256,
+                   demo_episodes=2, demo_policy="mpc-cv", bc_epochs=2)
+
+
+def test_flat_layout_names_every_index_and_round_trips():
+    cfg = CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5)
+    env = CrowdNavEnv(cfg)
+    obs, _ = env.reset(seed=1)
+    flat = gym.spaces.flatten(env.observation_space, obs)
+    names = field_names(cfg)
+    assert flat_size(cfg) == len(flat) == len(names) == 147
+    assert names[140:143] == ["robot.goal_x_m", "robot.goal_y_m", "robot.goal_distance_m"]
+    assert names[40 + 5 * 2 + 2] == "pedestrians[2].vx_mps" and names[25] == "pedestrian_mask[5]"
+    assert flat[142] == pytest.approx(np.linalg.norm(env.goal - env.robot_state[:2]), abs=1e-5)
+    back = unflatten(flat, cfg)
+    assert set(back) == set(obs) and all(np.array_equal(back[k], obs[k]) for k in obs)
+    batch = unflatten(np.stack([flat, flat]), cfg)
+    assert batch["pedestrians"].shape == (2, 20, 5)
+    with pytest.raises(ValueError, match="length 147"):
+        unflatten(flat[:-1], cfg)
+    pred = CrowdNavConfig(observation=ObservationConfig(predictions=True, max_pedestrians=4))
+    assert "| predictions |" in layout_table(pred) and flat_size(pred) == 4 + 4 + 20 + 3 * 12 * 4 * 2 + 7
+    holo = field_names(CrowdNavConfig(robot=__import__("planner").RobotConfig(model="holonomic")))
+    assert "robot.vx_mps" in holo
+
+
+def _batch(space: gym.spaces.Dict, seed: int = 0) -> dict[str, torch.Tensor]:
+    space.seed(seed)
+    obs = {k: torch.as_tensor(np.stack([space[k].sample() for _ in range(3)])) for k in space.spaces}
+    obs["pedestrian_mask"] = torch.tensor([[1.0] * 6 + [0.0] * 14, [1.0] * 20, [0.0] * 20])
+    obs["group_ids"] = torch.randint(0, 3, (3, 20)).float()
+    return obs
+
+
+@pytest.mark.parametrize("groups", [True, False])
+def test_extractor_is_a_set_function_of_the_real_rows(groups):
+    torch.manual_seed(0)
+    space = CrowdNavEnv(CrowdNavConfig(observation=ObservationConfig(predictions=True))).observation_space
+    ext = CrowdAttentionExtractor(space, use_groups=groups, use_predictions=True)
+    obs = _batch(space)
+    out = ext(obs)
+    assert out.shape == (3, ext.features_dim) and torch.isfinite(out).all()  # row 2: an empty scene
+    perm = torch.randperm(20)  # reorder the rows (all keys the same way): same features
+    shuffled = dict(obs, pedestrians=obs["pedestrians"][:, perm], pedestrian_mask=obs["pedestrian_mask"][:, perm],
+                    group_ids=obs["group_ids"][:, perm], predictions=obs["predictions"][:, :, :, perm])
+    assert torch.allclose(ext(shuffled), out, atol=1e-5)
+    junk = dict(obs, pedestrians=obs["pedestrians"].clone())  # padding rows carry no information
+    junk["pedestrians"][0, 6:] = 9.0
+    assert torch.allclose(ext(junk), out, atol=1e-6)
+    regrouped = dict(obs, group_ids=torch.zeros(3, 20))  # everyone one group
+    assert torch.allclose(ext(regrouped), out, atol=1e-6) != groups
+
+
+def test_behaviour_cloning_fits_the_experts_actions():
+    from stable_baselines3 import PPO
+
+    from envs.imitation import behaviour_clone, collect_demos
+
+    cfg = TINY.env_config()
+    demos = collect_demos(cfg, "mpc-cv", episodes=2, seed=7)
+    assert len(demos.actions) == len(demos.returns) == len(demos.obs["robot"]) and list(demos.episode_seed) == [7, 8]
+    assert set(demos.obs) == {"robot", "pedestrians", "pedestrian_mask", "group_ids"}
+    model = PPO("MultiInputPolicy", CrowdNavEnv(cfg), seed=0, device="cpu",
+                policy_kwargs={"features_extractor_class": CrowdAttentionExtractor})
+    obs = {k: torch.as_tensor(v) for k, v in demos.obs.items()}
+
+    def error() -> float:
+        with torch.no_grad():
+            mean = model.policy.get_distribution(obs).distribution.mean
+        return float((mean - torch.as_tensor(demos.actions)).abs().mean())
+
+    before = error()
+    losses = behaviour_clone(model, demos, epochs=60, batch_size=64, reset_log_std=-1.0)
+    assert losses[-1] < losses[0] and error() < 0.25 * before
+    assert float(model.policy.log_std.detach().mean()) == pytest.approx(-1.0)
+
+
+@pytest.mark.slow
+def test_train_evaluates_checkpoints_resumes_and_refuses_other_layouts(tmp_path):
+    out = tmp_path / "run"
+    assert train(TINY, out) == 0
+    rows = list(csv.DictReader((out / "eval.csv").open()))
+    assert [int(r["steps"]) for r in rows] == [0, 256, 512]  # eval at start, every 256 steps
+    meta = json.loads((out / "config.json").read_text())
+    assert TrainConfig.from_json(meta) == TINY
+    assert main(["train", "--resume", str(out), "--steps", "768"]) == 0
+    state = json.loads((out / "checkpoints" / "state.json").read_text())
+    assert state["steps"] == 768
+    from envs.policies import PolicyConfig, make_policy
+
+    env = CrowdNavEnv(TINY.env_config())
+    agent = make_policy(PolicyConfig(f"sb3:{out / 'final.zip'}"), env)
+    obs, _ = env.reset(seed=0)
+    assert env.action_space.contains(agent.act(obs, env))
+    other = CrowdNavEnv(CrowdNavConfig(observation=ObservationConfig(max_pedestrians=8)))
+    with pytest.raises(ValueError, match="max_pedestrians 20 \\(agent\\) vs 8 \\(env\\)"):
+        make_policy(PolicyConfig(f"sb3:{out / 'final.zip'}"), other)
+
+
+@pytest.mark.slow
+def test_diverged_training_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsys):
+    import envs.train_monitor as tm
+
+    out = tmp_path / "run"
+    assert train(TINY, out) == 0
+    good = (out / "checkpoints" / "latest.zip").read_bytes()
+    real = tm.load_checkpoint
+
+    def poisoned(model, monitor, path):
+        real(model, monitor, path)
+        with torch.no_grad():
+            next(model.policy.parameters()).fill_(float("nan"))
+
+    monkeypatch.setattr(tm, "load_checkpoint", poisoned)
+    assert main(["train", "--resume", str(out), "--steps", "2048"]) == 1
+    assert "diverged" in capsys.readouterr().err
+    assert (out / "checkpoints" / "latest.zip").read_bytes() == good
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--reward", "bogus=1"], "unknown reward term"),
+    (["--warm-start", "dagger"], "unknown warm_start"),
+    (["--envs", "0"], "envs must be an integer >= 1"),
+    (["--demos", "x.npz"], "--demos is used only with --warm-start"),
+    (["--scenario", "nowhere"], "unknown scenario"),
+    (["--workers", "4", "--envs", "2"], "must not exceed envs"),
+])
+def test_train_misuse_is_one_line_and_writes_nothing(tmp_path, capsys, argv, message):
+    out = tmp_path / "run"
+    assert main(["train", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_train_resume_and_config_errors(tmp_path, capsys):
+    assert main(["train", "--resume", str(tmp_path)]) == 2
+    assert "nothing to resume" in capsys.readouterr().err
+    bad = tmp_path / "run.toml"
+    bad.write_text("total_stepz = 5\n")
+    assert main(["train", "--config", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "unknown setting(s) ['total_stepz']" in capsys.readouterr().err
+    good = tmp_path / "good.toml"
+    good.write_text('scenario = "corridor"\npedestrians = 4\n[rewards]\ncollision = -20.0\n')
+    from crowdsim.cli import OneLineParser
+    from envs.train import add_arguments, config_from_args
+
+    parser = OneLineParser()
+    add_arguments(parser)
+    cfg, _, _ = config_from_args(parser.parse_args(["--config", str(good), "--pedestrians", "6"]))
+    assert cfg.scenario == "corridor" and cfg.pedestrians == 6 and cfg.env_config().rewards.collision == -20.0
