@@ -3,11 +3,13 @@
 1. Env throughput, one process, random policy (uniform actions in [-1, 1]^2 from a seeded Generator),
    scenario plaza, dt 0.1 s, at 20 and 50 pedestrians: env steps per second over several thousand steps,
    with the resets (crowd reset + 3.2 s warm-up + route choice) timed apart: steps/s excluding resets and
-   including them. Side by side, the reference: the bare `crowdsim.CrowdSimulator` with the env's own
-   config (`CrowdNavConfig(...).sim_config()`, dt 0.1 s), stepped with the robot set before each step as
-   the env does (here a robot walking at 1 m/s between opposite corners, reversing at each end). env/bare
-   is the fraction of the bare simulator's rate the env keeps (1 - it is the env's overhead). Wall time
-   (time.perf_counter) and process CPU time (time.process_time); best of 3 repeats, each metric on its own.
+   including them; side by side with the same numbers measured on the code before the throughput work
+   (`REFERENCE`, 2026-11-23, same machine) and the ratio new / before. Also side by side, the reference: the
+   bare `crowdsim.CrowdSimulator` with the env's own config (`CrowdNavConfig(...).sim_config()`, dt 0.1 s),
+   stepped with the robot set before each step as the env does (here a robot walking at 1 m/s between
+   opposite corners, reversing at each end). env/bare is the fraction of the bare simulator's rate the env
+   keeps (1 - it is the env's overhead). Wall time (time.perf_counter) and process CPU time
+   (time.process_time); best of 3 repeats, each metric on its own.
 2. Planner in the loop at 20 pedestrians: `mpc-gpgraph` (GP-Graph + MPC; if the default synthetic
    checkpoint does not load, `GPGraphPolicy(config, predictor="gpgraph-stgcnn-univ")`), `mpc-cv` and
    `social-force`, full episodes with fixed seeds. Env steps/s (act + step, resets excluded), the
@@ -16,12 +18,19 @@
    `plan` (the MPC with constant-velocity extrapolation inside for mpc-cv; 4 reactive calls per tick for
    social-force) and `env.step`, timed by wrapping those methods on the instances.
 
-Run: python bench/bench_env.py [--quick] [--steps 5000] [--episodes 3]
+3. Env throughput with W worker processes (default 2), in aggregate: each worker builds its own env, warms up,
+   waits for the others (a barrier), then runs the single-process loop of 1. (`steps` random steps, resets
+   timed apart); aggregate steps/s = all workers' steps / (last end - first start), including resets, and
+   the sum of the workers' rates excluding resets. Against the same measurement on the code before
+   (`REFERENCE`).
+
+Run: python bench/bench_env.py [--quick] [--steps 5000] [--episodes 3] [--workers 2] [--skip-planners]
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing as mp
 import os
 import platform
 import time
@@ -39,6 +48,16 @@ from planner import MPCConfig
 
 FALLBACK_PREDICTOR = "gpgraph-stgcnn-univ"
 TARGET_STEPS_PER_S = 2000.0
+TARGET_ONE_PROCESS = 3000.0  # issue 13 item 5: plaza, 20 pedestrians, one process
+TARGET_AGGREGATE = 5000.0  # ... and with 2 worker processes in aggregate
+# The same measurements on the code before the throughput work (issue 13 item 5), 2026-11-23, 2-core sandbox,
+# load 0.5-1.7 (2 workers: 3.6-3.8): steps/s (wall) excluding / including resets, mean reset ms, bare crowdsim
+# steps/s; and with 2 workers, the aggregate including resets and the summed rates excluding them.
+REFERENCE: dict[str, dict[str, float]] = {
+    "20": {"excl_wall": 1764.0, "incl_wall": 1636.0, "reset_ms": 8.2, "bare_wall": 4740.0},
+    "50": {"excl_wall": 1325.0, "incl_wall": 1163.0, "reset_ms": 12.8, "bare_wall": 3319.0},
+    "workers2_n20": {"incl_wall": 1572.0, "excl_wall": 1710.0},  # load 3.6-3.8: training on the other core
+}
 
 
 def _load() -> str:
@@ -122,6 +141,41 @@ def bench_throughput(n: int, steps: int, repeats: int) -> dict[str, float]:
         keep("bare_cpu", steps / b["cpu"])
     best["resets"] = float(np.mean(resets))
     return best
+
+
+def _worker(n: int, steps: int, seed: int, barrier: Any, out: Any) -> None:
+    env = CrowdNavEnv(CrowdNavConfig(n_pedestrians=n))
+    env_run(env, 50, seed=10_000 + seed)  # numba cache load, first allocations
+    barrier.wait()
+    start = time.perf_counter()  # CLOCK_MONOTONIC: comparable across processes
+    r = env_run(env, steps, seed=seed)
+    out.put({**r, "start": start, "end": time.perf_counter()})
+
+
+def bench_workers(n: int, steps: int, workers: int, repeats: int) -> dict[str, float]:
+    """Best-of-`repeats` aggregate rates of `workers` processes each running `env_run` for `steps` steps."""
+    ctx = mp.get_context("fork")
+    best: dict[str, float] = {}
+    for rep in range(repeats):
+        barrier, out = ctx.Barrier(workers), ctx.Queue()
+        procs = [ctx.Process(target=_worker, args=(n, steps, 100 * rep + w, barrier, out)) for w in range(workers)]
+        for p in procs:
+            p.start()
+        results = [out.get() for _ in procs]
+        for p in procs:
+            p.join()
+        wall = max(r["end"] for r in results) - min(r["start"] for r in results)
+        best["incl_wall"] = max(best.get("incl_wall", 0.0), workers * steps / wall)
+        best["excl_wall"] = max(best.get("excl_wall", 0.0),
+                                sum(steps / (r["wall"] - r["reset_wall"]) for r in results))
+    return best
+
+
+def _ratio(new: float, ref: float) -> str:
+    return f"{new / ref:.2f}x" if ref > 0 else "-"
+
+
+COMPARE_HEADER = ("| measurement | before (REFERENCE) | now | now / before |")
 
 
 THROUGHPUT_HEADER = ("| N | steps x repeats | resets / run | env steps/s excl. resets (wall / CPU) "
@@ -267,6 +321,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--episodes", type=int, default=3, help="episodes (seeds 0..E-1) per policy")
     parser.add_argument("--sizes", default="20,50", help="pedestrian counts for the throughput table")
+    parser.add_argument("--workers", type=int, default=2, help="worker processes for the aggregate rate (0: skip)")
+    parser.add_argument("--skip-planners", action="store_true", help="skip the planner-in-the-loop table")
     args = parser.parse_args(argv)
     steps, repeats = (300, 1) if args.quick else (args.steps, args.repeats)
     episodes, time_limit = (1, 20.0) if args.quick else (args.episodes, CrowdNavConfig().time_limit_s)
@@ -278,14 +334,48 @@ def main(argv: list[str] | None = None) -> None:
     print(THROUGHPUT_HEADER)
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     at_20 = None
+    rows: list[str] = []
     for n in (int(x) for x in args.sizes.split(",")):
         r = bench_throughput(n, steps, repeats)
         at_20 = r if n == 20 else at_20
         print(throughput_row(n, steps, repeats, r), flush=True)
+        ref = REFERENCE.get(str(n))
+        if ref:
+            for key, label in (("excl_wall", "steps/s excl. resets"), ("incl_wall", "steps/s incl. resets"),
+                               ("bare_wall", "bare crowdsim steps/s")):
+                rows.append(f"| N = {n}, one process, {label} (wall) | {ref[key]:,.0f} | {r[key]:,.0f} "
+                            f"| {_ratio(r[key], ref[key])} |")
+            reset_ms = 1e3 / r["reset_rate"]
+            rows.append(f"| N = {n}, one process, mean reset ms | {ref['reset_ms']:.1f} | {reset_ms:.1f} "
+                        f"| {_ratio(reset_ms, ref['reset_ms'])} |")
     if at_20 is not None:
         met = at_20["excl_wall"] >= TARGET_STEPS_PER_S
         print(f"target >= {TARGET_STEPS_PER_S:,.0f} env steps/s at 20 pedestrians (excl. resets, wall): "
               f"{'met' if met else 'NOT met'} ({at_20['excl_wall']:,.0f}; CPU-time rate {at_20['excl_cpu']:,.0f})")
+        for key, label in (("excl_wall", "excl."), ("incl_wall", "incl.")):
+            met = at_20[key] >= TARGET_ONE_PROCESS
+            print(f"target >= {TARGET_ONE_PROCESS:,.0f} env steps/s at 20 pedestrians, one process ({label} resets, "
+                  f"wall): {'met' if met else 'NOT met'} ({at_20[key]:,.0f})")
+    if args.workers > 0:
+        w = bench_workers(20, steps, args.workers, repeats)
+        ref = REFERENCE["workers2_n20"] if args.workers == 2 else {"incl_wall": 0.0, "excl_wall": 0.0}
+        rows.append(f"| N = 20, {args.workers} workers, aggregate steps/s incl. resets (wall) | "
+                    f"{ref['incl_wall']:,.0f} | {w['incl_wall']:,.0f} | {_ratio(w['incl_wall'], ref['incl_wall'])} |")
+        rows.append(f"| N = 20, {args.workers} workers, summed steps/s excl. resets (wall) | "
+                    f"{ref['excl_wall']:,.0f} | {w['excl_wall']:,.0f} | {_ratio(w['excl_wall'], ref['excl_wall'])} |")
+        for key, label in (("excl_wall", "excl."), ("incl_wall", "incl.")):
+            met = w[key] >= TARGET_AGGREGATE
+            print(f"target >= {TARGET_AGGREGATE:,.0f} env steps/s aggregate with {args.workers} workers ({label} "
+                  f"resets): {'met' if met else 'NOT met'} ({w[key]:,.0f})")
+    if rows:
+        print(f"\nbefore (REFERENCE, the code before the throughput work, 2026-11-23) and now; load average now "
+              f"{_load()}")
+        print(COMPARE_HEADER)
+        print("|---|---:|---:|---:|")
+        print("\n".join(rows), flush=True)
+    if args.skip_planners:
+        print(f"\nload average at end {_load()}; {time.perf_counter() - start:.0f} s in all")
+        return
     print(f"\nplanner in the loop, 20 pedestrians, plaza, {episodes} episode(s) (seeds 0..{episodes - 1}), "
           f"time limit {time_limit:.0f} s; per 0.4 s tick = 4 env steps")
     rows = []

@@ -83,7 +83,17 @@ def gaze_subgroups(pos: np.ndarray, goal: np.ndarray, label: np.ndarray, max_abr
         heading = goal[members].mean(axis=0) - pos[members].mean(axis=0)
         order = np.argsort(-(pos[members] @ heading), kind="stable")
         sub[members[order[(len(members) + 1) // 2:]]] += 1
-    return np.unique(sub, return_inverse=True)[1].astype(np.int64)
+    return dense_rank(sub)
+
+
+def dense_rank(values: np.ndarray) -> np.ndarray:
+    """(n,) int64 rank of each of values (n,) (non-negative ints) among their distinct values:
+    ``np.unique(values, return_inverse=True)[1]`` without the sort."""
+    if len(values) == 0:
+        return np.zeros(0, np.int64)
+    present = np.zeros(int(values.max()) + 1, np.int64)
+    present[values] = 1
+    return (np.cumsum(present) - 1)[values]
 
 
 def formation_goals(positions: np.ndarray, destination: np.ndarray, spacing_m: float) -> np.ndarray:

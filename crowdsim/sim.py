@@ -7,6 +7,7 @@ contacts in sub-steps of at most 0.05 s. All randomness comes from the Generator
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,6 +62,9 @@ class CrowdSimulator:
         self.n_spawned = 0
         self.n_exited = 0
         self._index_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        # (active slots, their labels, dense labels, whether a group is larger than 3): reused while unchanged
+        self._label_cache: tuple[np.ndarray, np.ndarray, np.ndarray, bool] | None = None
+        self._synced = False  # slots.pos / vel hold what the world would read (no physics step since the read)
 
     def reset(self, seed: int | None = None) -> CrowdState:
         """Start a new crowd. The same seed and config give the same run, bit for bit."""
@@ -180,7 +184,8 @@ class CrowdSimulator:
         radius = self.config.robot.radius_m if radius_m is None else float(radius_m)
         if pos.shape != (2,) or vel.shape != (2,):
             raise ValueError(f"robot pos and vel must have shape (2,), got {pos.shape} and {vel.shape}")
-        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel)) and np.isfinite(radius)) or radius <= 0:
+        if not all(map(math.isfinite, (float(pos[0]), float(pos[1]), float(vel[0]), float(vel[1]), radius))) \
+                or radius <= 0:
             raise ValueError(f"robot state must be finite with a positive radius: pos={pos}, vel={vel}, "
                              f"radius={radius}")
         self.robot = Robot(pos.copy(), vel.copy(), radius)
@@ -197,6 +202,7 @@ class CrowdSimulator:
         for _ in range(self.config.force_steps_per_record):
             self._force_step()
         self.world.read(self.slots.pos, self.slots.vel)
+        self._synced = True
         self._wrap_periodic()
         self._arrivals()
         apply_events(self.slots, self.book, self.rng, self.config, self.scenario)
@@ -225,7 +231,7 @@ class CrowdSimulator:
         radius = s.radius[idx]
         pos_all, rad_all, e_all = pos, radius, e
         if self.robot is not None and cfg.robot.visible:
-            e_r, _ = forces.unit(self.robot.vel[None])
+            e_r = self._robot_heading()
             pos_all = np.concatenate([pos, self.world.robot_position()[None]])
             rad_all, e_all = np.append(radius, self.robot.radius_m), np.concatenate([e, e_r])
         pos_all, rad_all, e_all = self._periodic_ghosts(pos_all, rad_all, e_all)
@@ -241,13 +247,30 @@ class CrowdSimulator:
         acc += forces.group_acc(pos, vel, e, labels, i[inner], j[inner], cfg.group_forces, gaze)
         return acc, idx
 
+    def _robot_heading(self) -> np.ndarray:
+        """(1, 2) `forces.unit` of the robot's velocity (the same float operations, without array overhead)."""
+        vx, vy = float(self.robot.vel[0]), float(self.robot.vel[1])
+        norm = math.sqrt(vx * vx + vy * vy)
+        moving = norm > forces._EPS
+        safe = norm if moving else 1.0
+        return np.array([[vx / safe * float(moving), vy / safe * float(moving)]])
+
     def _active_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Active slots (n,), their dense group labels (n,) and gaze sub-group labels (n,); cached while
         membership is unchanged (it only changes between recording steps: spawns, exits and group events)."""
         if self._index_cache is None:
-            idx = np.flatnonzero(self.slots.active)
-            dense = self.slots.dense_labels(idx)
-            self._index_cache = (idx, dense, gaze_subgroups(self.slots.pos[idx], self.slots.goal[idx], dense))
+            s = self.slots
+            idx = np.flatnonzero(s.active)
+            labels, prev = s.label[idx], self._label_cache
+            if prev is not None and np.array_equal(prev[0], idx) and np.array_equal(prev[1], labels):
+                dense, big = prev[2], prev[3]
+            else:
+                dense = s.dense_labels(idx)
+                big = bool(len(dense)) and int(np.bincount(dense).max()) > 3
+                self._label_cache = (idx, labels, dense, big)
+            # with no group above 3 every group is one sub-group: gaze_subgroups would return `dense` itself
+            gaze = gaze_subgroups(s.pos[idx], s.goal[idx], dense) if big else dense
+            self._index_cache = (idx, dense, gaze)
         return self._index_cache
 
     def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray,
@@ -266,7 +289,8 @@ class CrowdSimulator:
 
     def _force_step(self) -> None:
         s, cfg = self.slots, self.config
-        self.world.read(s.pos, s.vel)
+        if not self._synced:  # right after a step's final read the world holds exactly slots.pos / vel
+            self.world.read(s.pos, s.vel)
         if not s.active.any():
             return
         self._ring_goals()
@@ -281,6 +305,7 @@ class CrowdSimulator:
             if k:
                 self.world.repeat_force()
             self.world.step(cfg.physics_dt_s)
+        self._synced = False
 
     def _ring_goals(self) -> None:
         """On a periodic ring every goal stays 5 m ahead of its pedestrian, so nobody ever arrives."""
@@ -301,7 +326,10 @@ class CrowdSimulator:
         idx = np.flatnonzero(s.active)
         if self.book.stops:  # a group on its way to a stop, or standing, has not arrived anywhere
             idx = idx[~behaviours.stopped(self.book, s.label[idx])]
-        dist = np.linalg.norm(s.pos[idx] - s.goal[idx], axis=1)
+        d = s.pos[idx] - s.goal[idx]
+        dist = np.sqrt(np.einsum("ij,ij->i", d, d))  # = np.linalg.norm(d, axis=1), bit for bit
+        if not (dist < scen.exit_radius_m).any():  # nobody arrived: nothing below would act
+            return
         if scen.on_arrival == "remove":
             # a group leaves together: with one member out, those within 2 m of their own exit follow at once
             # (a remnant would otherwise count as a smaller group for a second or two)

@@ -36,6 +36,7 @@ class PhysicsWorld:
         self._slot_of_body: dict[int, int] = {}
         self._order: np.ndarray = np.empty(0, np.int64)
         self._is_ped: np.ndarray = np.empty(0, bool)
+        self._ped_slots: np.ndarray = np.empty(0, np.int64)  # order[is_ped]: the slot of each pedestrian body
         self._dirty = False
         self._robot: pymunk.Body | None = None
         self._robot_radius = 0.0
@@ -99,15 +100,9 @@ class PhysicsWorld:
             ids = np.frombuffer(buf.int_buf(), dtype=np.int64)
             self._order = np.array([self._slot_of_body.get(int(b), -1) for b in ids], dtype=np.int64)
             self._is_ped = self._order >= 0
+            self._ped_slots = self._order[self._is_ped]
             self._dirty = False
         return self._order
-
-    def _gather(self, rows: np.ndarray) -> np.ndarray:
-        """Rows (C, 2) in body order, zeros for non-pedestrian bodies."""
-        order = self._body_order()
-        out = np.zeros((len(order), 2))
-        out[self._is_ped] = rows[order[self._is_ped]]
-        return out
 
     def read(self, pos_out: np.ndarray, vel_out: np.ndarray) -> None:
         """Write every body's position and velocity into rows `slot` of pos_out / vel_out (C, 2)."""
@@ -116,19 +111,20 @@ class PhysicsWorld:
             return
         self._buf_get.clear()
         batch.get_space_bodies(self.space, _PV, self._buf_get)
-        data = np.frombuffer(self._buf_get.float_buf(), dtype=np.float64).reshape(-1, 4)
-        ped = self._is_ped
-        pos_out[order[ped]] = data[ped, 0:2]
-        vel_out[order[ped]] = data[ped, 2:4]
+        data = np.frombuffer(self._buf_get.float_buf(), dtype=np.float64).reshape(-1, 4)[self._is_ped]
+        pos_out[self._ped_slots] = data[:, 0:2]
+        vel_out[self._ped_slots] = data[:, 2:4]
 
     def write(self, vel: np.ndarray, force: np.ndarray) -> None:
         """Set velocity (C, 2) m/s and force (C, 2) N of every body from rows `slot`."""
         order = self._body_order()
         if len(order) == 0:
             return
-        gathered = self._gather(force)
-        self._force_packed = np.ascontiguousarray(gathered.ravel())
-        packed = np.ascontiguousarray(np.concatenate([self._gather(vel), gathered], axis=1).ravel())
+        rows = np.zeros((len(order), 4))  # per body: velocity, force; zeros for non-pedestrian bodies
+        rows[self._is_ped, 0:2] = vel[self._ped_slots]
+        rows[self._is_ped, 2:4] = force[self._ped_slots]
+        self._force_packed = np.ascontiguousarray(rows[:, 2:4]).ravel()
+        packed = rows.ravel()
         self._packed = packed  # keep the memory alive while pymunk reads it
         self._buf_set.set_float_buf(packed)
         robot_vel = None if self._robot is None else self._robot.velocity

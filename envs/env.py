@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -26,7 +27,7 @@ from envs.attribution import collision_kind
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
-from envs.geometry import intruded_groups, point_segment_distances, swept_distances
+from envs.geometry import WallIndex, intruded_groups, swept_distances
 from envs.history import PedHistory
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
@@ -113,6 +114,8 @@ class CrowdNavEnv(gym.Env):
         self._annotations: dict[str, np.ndarray | None] = {}
         self._pred_samples: np.ndarray | None = None
         self._pred_groups: np.ndarray | None = None
+        self._walls = WallIndex(self.crowd.walls)  # the walls never change: precomputed for the per-step check
+        self._peds_cache: tuple[CrowdState | None, Pedestrians | None] = (None, None)
 
     # ------------------------------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
@@ -166,7 +169,8 @@ class CrowdNavEnv(gym.Env):
         # 4. rewards
         facts = self._facts(before_pos, before, dist_before)
         terms = weighted(reward_terms(facts, cfg), cfg)
-        self.metrics.update(cfg.dt_s, float(np.linalg.norm(self.robot_state[:2] - before_pos)),
+        moved = self.robot_state[:2] - before_pos
+        self.metrics.update(cfg.dt_s, math.sqrt(moved.dot(moved)),
                             facts.min_surface_distance_m, cfg.discomfort_distance_m, facts.intruding)
         # 5. terminated, 6. truncated
         terminated = facts.collided or facts.reached_goal
@@ -199,6 +203,14 @@ class CrowdNavEnv(gym.Env):
         act = s.active
         return Pedestrians(s.pos[act], s.vel[act], s.radius[act], s.group_id[act], s.ped_id[act])
 
+    def _peds(self) -> Pedestrians:
+        """`pedestrians()` of the current state, built once per state: internal, read-only use only."""
+        state, peds = self._peds_cache
+        if state is not self._state or peds is None:
+            peds = self.pedestrians()
+            self._peds_cache = (self._state, peds)
+        return peds
+
     def planner_view(self) -> PlannerView:
         """The typed view planner-based policies read (see `PlannerView`)."""
         return PlannerView(self.robot_state.copy(), self.goal.copy(), self.config.robot, self.pedestrians(),
@@ -227,15 +239,17 @@ class CrowdNavEnv(gym.Env):
         a = np.asarray(action, dtype=float)
         if a.shape != (2,):
             raise ValueError(f"action must have shape (2,), got {a.shape}")
-        if not np.all(np.isfinite(a)):
+        a0, a1 = float(a[0]), float(a[1])
+        if not (math.isfinite(a0) and math.isfinite(a1)):
             raise ValueError(f"action must be finite, got {a}")
-        a = np.clip(a, -1.0, 1.0)
+        # np.clip(a, -1, 1) on floats (a bound wins a tie, as in numpy)
+        a0, a1 = ((x if x < 1.0 else 1.0) if x > -1.0 else -1.0 for x in (a0, a1))
         r = self.config.robot
         if r.model == "unicycle":
             lo, hi = -r.min_speed_mps, r.max_speed_mps
-            u = np.array([lo + (a[0] + 1.0) * 0.5 * (hi - lo), a[1] * r.max_yaw_rate_radps])
+            u = np.array([lo + (a0 + 1.0) * 0.5 * (hi - lo), a1 * r.max_yaw_rate_radps])
         else:
-            u = a * r.max_speed_mps
+            u = np.array([a0 * r.max_speed_mps, a1 * r.max_speed_mps])
         return clip_control(self.robot_state, u, self.config.dt_s, r)
 
     def control_to_action(self, control: np.ndarray) -> np.ndarray:
@@ -272,11 +286,12 @@ class CrowdNavEnv(gym.Env):
 
     # ---------------------------------------------------------------------------------- internals
     def _record_tick(self) -> None:
-        p = self.pedestrians()
+        p = self._peds()
         self.history.record(p.ped_id, p.pos)
 
     def _goal_distance(self) -> float:
-        return float(np.linalg.norm(self.goal - self.robot_state[:2]))
+        d = self.goal - self.robot_state[:2]
+        return math.sqrt(d.dot(d))  # = np.linalg.norm(d) (sqrt of the same dot product), without its overhead
 
     def _choose_route(self) -> tuple[np.ndarray, np.ndarray]:
         """A route whose start is clear of every pedestrian by start_clearance_m (the last draw otherwise)."""
@@ -304,7 +319,7 @@ class CrowdNavEnv(gym.Env):
         self._pred_samples, self._pred_groups = pred.samples, pred.group_id
 
     def _observe(self) -> dict[str, np.ndarray]:
-        cfg, p = self.config, self.pedestrians()
+        cfg, p = self.config, self._peds()
         groups, samples = p.group_id, None
         if cfg.observation.needs_predictor and self._pred_samples is not None \
                 and self._pred_samples.shape[2] == len(p.pos):  # rows change only between ticks
@@ -317,7 +332,7 @@ class CrowdNavEnv(gym.Env):
 
     def _facts(self, before_pos: np.ndarray, before: CrowdState, dist_before: float) -> StepFacts:
         """Distances, contact and intrusion of the step just simulated (`before`: the crowd at its start)."""
-        cfg, p, s = self.config, self.pedestrians(), self._state
+        cfg, p, s = self.config, self._peds(), self._state
         here, r = self.robot_state[:2], cfg.robot.radius_m
         centre = np.hypot(*(p.pos - here).T)
         surface = centre - p.radius - r
@@ -329,7 +344,7 @@ class CrowdNavEnv(gym.Env):
             surface[both] = np.minimum(surface[both], swept)
         min_surface = float(surface.min()) if len(surface) else float("inf")
         self._nearest_row = int(np.flatnonzero(s.active)[np.argmin(surface)]) if len(surface) else -1
-        hit_wall = bool(len(self.crowd.walls)) and float(point_segment_distances(here, self.crowd.walls).min()) < r
+        hit_wall = self._walls.within(here, r)
         intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
                                          cfg.group_span_m, centre))
         dist_after = self._goal_distance()

@@ -5,6 +5,8 @@ Everything is a pure function of arrays (metres).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -15,8 +17,10 @@ def swept_distances(robot0: np.ndarray, robot1: np.ndarray, peds0: np.ndarray, p
     dv = (peds1 - peds0) - (robot1 - robot0)  # relative displacement over the step
     denom = np.einsum("ij,ij->i", dv, dv)
     t = np.where(denom > 1e-12, -np.einsum("ij,ij->i", d0, dv) / np.maximum(denom, 1e-12), 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    return np.linalg.norm(d0 + t[:, None] * dv, axis=1)
+    # = np.linalg.norm(d0 + clip(t, 0, 1) dv, axis=1): a -0.0 that np.clip would turn into 0.0 only flips the sign
+    # of a zero added to d0, which squaring removes
+    d = d0 + np.minimum(np.maximum(t, 0.0), 1.0)[:, None] * dv
+    return np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
 def point_segment_distances(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
@@ -30,41 +34,77 @@ def point_segment_distances(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
     return np.linalg.norm(p - closest, axis=1)
 
 
-def convex_hull(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull (H, 2) of points (n, 2) (Andrew's monotone chain); collinear points
-    collapse to the two ends, a single point to itself."""
-    pts = np.unique(np.asarray(points, float), axis=0)
+class WallIndex:
+    """Static wall segments (S, 2, 2) m with their bounding boxes, for the per-step robot-wall contact test."""
+
+    def __init__(self, segments: np.ndarray) -> None:
+        self.segments = np.asarray(segments, float).reshape(-1, 2, 2)
+        lo, hi = self.segments.min(axis=1), self.segments.max(axis=1)
+        self._centre, self._half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+
+    def within(self, p: np.ndarray, r: float) -> bool:
+        """Whether point p (2,) is closer than r m to a wall: ``point_segment_distances(p, segments).min() < r``,
+        computed exactly for the walls whose bounding box grown by r (+1 um) holds p (no other can be that close)."""
+        if len(self.segments) == 0:
+            return False
+        near = np.flatnonzero(np.all(np.abs(p - self._centre) <= self._half + (r + 1e-6), axis=1))
+        return bool(len(near)) and float(point_segment_distances(p, self.segments[near]).min()) < r
+
+
+def _cross(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+def _hull_list(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """`convex_hull` on a list of (x, y) floats (the same operations, without numpy's per-call overhead)."""
+    pts = sorted(set(points))  # lexicographic (x, then y), duplicates dropped, as np.unique(axis=0)
     if len(pts) <= 2:
         return pts
 
-    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-    def chain(seq: np.ndarray) -> list[np.ndarray]:
-        out: list[np.ndarray] = []
+    def chain(seq: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
         for p in seq:
-            while len(out) >= 2 and cross(out[-2], out[-1], p) <= 1e-12:
+            while len(out) >= 2 and _cross(out[-2], out[-1], p) <= 1e-12:
                 out.pop()
             out.append(p)
         return out
 
     lower, upper = chain(pts), chain(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
+    return lower[:-1] + upper[:-1]
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """Counter-clockwise convex hull (H, 2) of points (n, 2) (Andrew's monotone chain); collinear points
+    collapse to the two ends, a single point to itself."""
+    pts = np.asarray(points, float).reshape(-1, 2)
+    return np.array(_hull_list([(x, y) for x, y in pts.tolist()]), float).reshape(-1, 2)
+
+
+def _segment_distance(px: float, py: float, a: tuple[float, float], b: tuple[float, float]) -> float:
+    """`point_segment_distances` of one segment a -> b, on floats (the same operations)."""
+    abx, aby = b[0] - a[0], b[1] - a[1]
+    den = abx * abx + aby * aby
+    t = ((px - a[0]) * abx + (py - a[1]) * aby) / (den if den > 1e-12 else 1e-12)
+    t = 0.0 if not t > 0.0 else t if t < 1.0 else 1.0
+    dx, dy = px - (a[0] + t * abx), py - (a[1] + t * aby)
+    return math.sqrt(dx * dx + dy * dy)
+
+
+def _hull_distance(px: float, py: float, hull: list[tuple[float, float]]) -> float:
+    """`distance_to_hull` for a hull of 2 or more vertices given as floats."""
+    if len(hull) == 2:
+        return _segment_distance(px, py, hull[0], hull[1])
+    edges = list(zip(hull, hull[1:] + hull[:1], strict=True))
+    if all((b[0] - a[0]) * (py - a[1]) - (b[1] - a[1]) * (px - a[0]) >= 0.0 for a, b in edges):
+        return 0.0
+    return min(_segment_distance(px, py, a, b) for a, b in edges)
 
 
 def distance_to_hull(p: np.ndarray, hull: np.ndarray) -> float:
     """Distance m from p (2,) to the convex polygon hull (H, 2) (counter-clockwise); 0 inside."""
     if len(hull) == 1:
         return float(np.linalg.norm(p - hull[0]))
-    edges = np.stack([hull, np.roll(hull, -1, axis=0)], axis=1)
-    if len(hull) == 2:
-        edges = edges[:1]
-    if len(hull) >= 3:
-        e = edges[:, 1] - edges[:, 0]
-        rel = p - edges[:, 0]
-        if np.all(e[:, 0] * rel[:, 1] - e[:, 1] * rel[:, 0] >= 0.0):
-            return 0.0
-    return float(point_segment_distances(p, edges).min())
+    return _hull_distance(float(p[0]), float(p[1]), [(x, y) for x, y in np.asarray(hull, float).tolist()])
 
 
 def intruded_groups(robot: np.ndarray, reach_m: float, pos: np.ndarray, radius: np.ndarray, group_id: np.ndarray,
@@ -80,15 +120,21 @@ def intruded_groups(robot: np.ndarray, reach_m: float, pos: np.ndarray, radius: 
         return []
     if dist is None:
         dist = np.hypot(*(pos - robot).T)
+    near = group_id[dist <= max_span_m + reach_m + 0.5]
+    if len(near) == 0:
+        return []
+    px, py = float(robot[0]), float(robot[1])
     out = []
-    for g in set(group_id[dist <= max_span_m + reach_m + 0.5].tolist()):
-        sel = group_id == g
-        members = pos[sel]
-        if len(members) < 2:
+    for g in set(near.tolist()):
+        sel = np.flatnonzero(group_id == g)
+        if len(sel) < 2:
             continue
-        diff = members[:, None] - members[None]
-        if np.einsum("ijk,ijk->ij", diff, diff).max() > max_span_m**2:
+        members = [(x, y) for x, y in pos[sel].tolist()]
+        span2 = max((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) for a in members for b in members)
+        if span2 > max_span_m**2:
             continue
-        if distance_to_hull(robot, convex_hull(members)) < reach_m + radius[sel].max():
+        hull = _hull_list(members)
+        d = float(np.linalg.norm(robot - np.array(hull[0]))) if len(hull) == 1 else _hull_distance(px, py, hull)
+        if d < reach_m + float(radius[sel].max()):
             out.append(int(g))
     return sorted(out)

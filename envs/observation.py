@@ -52,15 +52,23 @@ def rotation(heading: float) -> np.ndarray:
 
 def dense_in_order(ids: np.ndarray) -> np.ndarray:
     """Renumber ids (n,) 0..G-1 in order of first appearance."""
-    _, first, inverse = np.unique(ids, return_index=True, return_inverse=True)
-    rank = np.empty(len(first), np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-    return rank[inverse]
+    rank: dict = {}
+    return np.array([rank.setdefault(i, len(rank)) for i in np.asarray(ids).tolist()], np.int64)
+
+
+def _bounds(space: spaces.Dict) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """(low, high) of each Box of an observation space, cached on the space (its Boxes do not change)."""
+    cached = getattr(space, "_crowdnav_bounds", None)
+    if cached is None:
+        cached = {key: (box.low, box.high) for key, box in space.spaces.items()}
+        space._crowdnav_bounds = cached
+    return cached
 
 
 def nearest_rows(robot_pos: np.ndarray, pos: np.ndarray, cfg: CrowdNavConfig) -> np.ndarray:
     """Indices into pos (n, 2) of the observed pedestrians: within the sensor range, nearest first, at most P."""
-    dist = np.linalg.norm(pos - robot_pos, axis=1)
+    d = pos - robot_pos
+    dist = np.sqrt(np.einsum("ij,ij->i", d, d))  # = np.linalg.norm(d, axis=1), bit for bit
     order = np.argsort(dist, kind="stable")
     order = order[dist[order] <= cfg.observation.sensor_range_m]
     return order[: cfg.observation.max_pedestrians]
@@ -96,4 +104,5 @@ def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.n
         if samples is not None and n:
             pred[:, :, :n] = (samples[:k, :, rows] - here) @ rot.T
         out["predictions"] = pred
-    return {key: np.clip(val, space[key].low, space[key].high).astype(np.float32) for key, val in out.items()}
+    bounds = _bounds(space)
+    return {key: np.clip(val, *bounds[key]).astype(np.float32) for key, val in out.items()}

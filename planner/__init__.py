@@ -5,7 +5,8 @@ Imports numpy and casadi only. Entry points:
 * :class:`MPCPlanner` ``(config).plan(robot_state, goal, prediction, obstacles) -> PlanResult``;
 * :class:`PedPrediction` (the prediction input), :func:`constant_velocity_prediction`,
   :func:`frozen_prediction`;
-* :func:`robot_dynamics` (the ``casadi.Function`` the env steps the robot with) and :func:`step_robot`;
+* :func:`robot_dynamics` (the MPC's ``casadi.Function``) and :func:`step_robot` (its bit-identical float
+  twin, which the env steps the robot with);
 * baselines via :func:`make_planner` (``mpc``, ``mpc_cv``, ``mpc_frozen``, ``social_force``);
 * :data:`CROWD_MPC`, the recommended :class:`MPCConfig` among real crowds (crowd-risk options: planner/risk.py).
 """

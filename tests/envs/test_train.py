@@ -138,7 +138,7 @@ def test_diverged_training_stops_and_keeps_the_last_good_checkpoint(tmp_path, mo
 
 @pytest.mark.parametrize("argv, message", [
     (["--reward", "bogus=1"], "unknown reward term"),
-    (["--warm-start", "dagger"], "unknown warm_start"),
+    (["--warm-start", "gail"], "unknown warm_start"),
     (["--envs", "0"], "envs must be an integer >= 1"),
     (["--demos", "x.npz"], "--demos is used only with --warm-start"),
     (["--scenario", "nowhere"], "unknown scenario"),

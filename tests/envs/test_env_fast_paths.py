@@ -1,0 +1,123 @@
+"""The env's and the simulator's fast paths give the same results as the straightforward numpy code."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdsim.groups import dense_rank, gaze_subgroups
+from crowdsim.state import Slots
+from envs.geometry import (
+    WallIndex,
+    convex_hull,
+    distance_to_hull,
+    intruded_groups,
+    point_segment_distances,
+    swept_distances,
+)
+from envs.observation import dense_in_order
+
+
+def _hull_reference(points: np.ndarray) -> np.ndarray:
+    pts = np.unique(np.asarray(points, float), axis=0)
+    if len(pts) <= 2:
+        return pts
+
+    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    def chain(seq: np.ndarray) -> list[np.ndarray]:
+        out: list[np.ndarray] = []
+        for p in seq:
+            while len(out) >= 2 and cross(out[-2], out[-1], p) <= 1e-12:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = chain(pts), chain(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def _hull_distance_reference(p: np.ndarray, hull: np.ndarray) -> float:
+    edges = np.stack([hull, np.roll(hull, -1, axis=0)], axis=1)
+    if len(hull) == 2:
+        edges = edges[:1]
+    if len(hull) >= 3:
+        e, rel = edges[:, 1] - edges[:, 0], p - edges[:, 0]
+        if np.all(e[:, 0] * rel[:, 1] - e[:, 1] * rel[:, 0] >= 0.0):
+            return 0.0
+    return float(point_segment_distances(p, edges).min())
+
+
+def test_convex_hull_and_distance_match_reference() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        pts = rng.normal(0.0, 1.0, (int(rng.integers(1, 7)), 2))
+        if rng.random() < 0.2:
+            pts[-1] = pts[0]  # a duplicate
+        hull = convex_hull(pts)
+        assert np.array_equal(hull, _hull_reference(pts))
+        if len(hull) >= 2:
+            p = rng.normal(0.0, 1.5, 2)
+            assert distance_to_hull(p, hull) == _hull_distance_reference(p, hull)
+
+
+def test_intruded_groups_matches_reference() -> None:
+    rng = np.random.default_rng(1)
+    hits = 0
+    for _ in range(300):
+        n = int(rng.integers(0, 12))
+        pos, radius = rng.uniform(-3.0, 3.0, (n, 2)), rng.uniform(0.2, 0.3, n)
+        group = rng.integers(0, 4, n)
+        robot = rng.uniform(-3.0, 3.0, 2)
+        got = intruded_groups(robot, 0.6, pos, radius, group, 2.5)
+        want = []
+        for g in sorted(set(group.tolist())):
+            sel = group == g
+            members = pos[sel]
+            if len(members) < 2 or np.hypot(*(members - robot).T).min() > 2.5 + 0.6 + 0.5:
+                continue
+            diff = members[:, None] - members[None]
+            if np.einsum("ijk,ijk->ij", diff, diff).max() > 2.5**2:
+                continue
+            hull = _hull_reference(members)
+            d = float(np.linalg.norm(robot - hull[0])) if len(hull) == 1 else _hull_distance_reference(robot, hull)
+            if d < 0.6 + radius[sel].max():
+                want.append(int(g))
+        assert got == want
+        hits += bool(got)
+    assert hits > 10
+
+
+def test_wall_index_and_swept_distances() -> None:
+    rng = np.random.default_rng(2)
+    walls = rng.uniform(-5.0, 5.0, (12, 2, 2))
+    index = WallIndex(walls)
+    for _ in range(2000):
+        p, r = rng.uniform(-6.0, 6.0, 2), float(rng.uniform(0.05, 1.0))
+        assert index.within(p, r) == (float(point_segment_distances(p, walls).min()) < r)
+    assert not WallIndex(np.zeros((0, 2, 2))).within(np.zeros(2), 1.0)
+    r0, r1 = rng.normal(0, 1, 2), rng.normal(0, 1, 2)
+    p0, p1 = rng.normal(0, 2, (50, 2)), rng.normal(0, 2, (50, 2))
+    d0, dv = p0 - r0, (p1 - p0) - (r1 - r0)
+    denom = np.einsum("ij,ij->i", dv, dv)
+    t = np.clip(np.where(denom > 1e-12, -np.einsum("ij,ij->i", d0, dv) / np.maximum(denom, 1e-12), 0.0), 0.0, 1.0)
+    assert np.array_equal(swept_distances(r0, r1, p0, p1), np.linalg.norm(d0 + t[:, None] * dv, axis=1))
+
+
+def test_dense_labels_match_unique() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        n = int(rng.integers(0, 15))
+        ids = rng.integers(0, 40, n)
+        _, first, inverse = np.unique(ids, return_index=True, return_inverse=True)
+        rank = np.empty(len(first), np.int64)
+        rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+        assert np.array_equal(dense_in_order(ids), rank[inverse])
+        assert np.array_equal(dense_rank(ids), np.unique(ids, return_inverse=True)[1])
+        slots = Slots.empty(n)
+        slots.label[:] = ids
+        assert np.array_equal(slots.dense_labels(np.arange(n)), np.unique(ids, return_inverse=True)[1])
+        if n:
+            dense = np.unique(ids, return_inverse=True)[1]
+            sub = gaze_subgroups(rng.normal(0, 1, (n, 2)), rng.normal(0, 1, (n, 2)), dense)
+            assert sub.dtype == np.int64 and set(sub.tolist()) == set(range(int(sub.max()) + 1))
