@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ast
 import json
+import pickle  # only for its exception class: nothing is unpickled here
 import re
 import zipfile
 from collections import deque
@@ -39,6 +40,9 @@ ALLOWED_CLASSES = {  # readable class names in policy_kwargs -> (module, attribu
     **{f"<class 'torch.nn.modules.activation.{n}'>": ("torch.nn", n) for n in ("ReLU", "Tanh", "ELU", "GELU", "SiLU")},
     "<class 'torch.optim.adam.Adam'>": ("torch.optim", "Adam"),
 }
+# What a damaged file raises inside SB3/torch loading (weights_only refusals are UnpicklingError).
+LOAD_ERRORS = (ValueError, RuntimeError, KeyError, TypeError, EOFError, OSError, zipfile.BadZipFile,
+               pickle.UnpicklingError)
 _BOX_RE = re.compile(r"'(\w+)': Box\([^()]*?\((\d+(?:, \d+)*),?\), \w+\)")
 
 
@@ -137,7 +141,7 @@ def load_agent(path: Path, algo: str, env: Any) -> Any:
                   policy_class=cls.policy_aliases["MultiInputPolicy"])
     try:
         return cls.load(path, custom_objects=custom, device="cpu")
-    except (ValueError, RuntimeError, KeyError, TypeError, zipfile.BadZipFile, EOFError) as exc:
+    except LOAD_ERRORS as exc:
         raise ValueError(f"{path}: cannot load as {algo} for this env ({str(exc).splitlines()[0]})") from exc
 
 
@@ -146,7 +150,7 @@ def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
     check_layout(read_data(path), path, config)
     try:
         model.set_parameters(str(path), exact_match=True, device="cpu")
-    except (ValueError, RuntimeError, KeyError, zipfile.BadZipFile) as exc:
+    except LOAD_ERRORS as exc:
         raise ValueError(f"{path}: cannot load its weights ({str(exc).splitlines()[0]})") from exc
 
 

@@ -167,3 +167,37 @@ def test_train_resume_and_config_errors(tmp_path, capsys):
     add_arguments(parser)
     cfg, _, _ = config_from_args(parser.parse_args(["--config", str(good), "--pedestrians", "6"]))
     assert cfg.scenario == "corridor" and cfg.pedestrians == 6 and cfg.env_config().rewards.collision == -20.0
+
+
+def test_readme_layout_table_matches_the_code():
+    from pathlib import Path
+
+    from envs.obs_layout import blocks
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    for b in blocks(CrowdNavConfig()):
+        assert f"| {b.key} | {b.start}-{b.stop - 1} | {b.shape} |" in readme
+
+
+def test_a_corrupt_agent_file_is_one_line_on_the_command_line(tmp_path, capsys):
+    import zipfile
+
+    from stable_baselines3 import PPO
+
+    from envs.sb3_io import save_agent
+
+    cfg = TINY.env_config()
+    good = tmp_path / "agent.zip"
+    save_agent(PPO("MultiInputPolicy", CrowdNavEnv(cfg), n_steps=64, batch_size=32, device="cpu",
+                   policy_kwargs={"features_extractor_class": CrowdAttentionExtractor}), good, cfg)
+    bad = tmp_path / "bad.zip"
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(bad, "w") as dst:
+        for name in src.namelist():
+            dst.writestr(name, b"\x00garbage" if name == "policy.pth" else src.read(name))
+    argv = ["evaluate", "--scenario", "circle_crossing", "--pedestrians", "5", "--episodes", "1", "--workers", "1",
+            "--record", "0", "--no-progress", "--out", str(tmp_path / "eval")]
+    assert main([*argv, "--policy", f"sb3:{good}"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--policy", f"sb3:{bad}"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot load" in err and len(err.strip().splitlines()) == 1
