@@ -56,6 +56,7 @@ class TrainConfig:
     gae_lambda: float = 0.95
     clip_range: float = 0.2
     ent_coef: float = 0.0
+    target_kl: float | None = None   # stop an update's epochs once the approximate KL passes 1.5x this
     log_std_init: float = -0.5
     warm_start: str = "none"          # "bc": behaviour cloning of demo_policy before PPO; "dagger": then DAgger
     demo_policy: str = "mpc-gpgraph"
@@ -81,6 +82,8 @@ class TrainConfig:
             raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
         if self.workers > self.envs:
             raise ValueError(f"workers ({self.workers}) must not exceed envs ({self.envs})")
+        if self.target_kl is not None and not self.target_kl > 0:
+            raise ValueError(f"target_kl must be > 0 (or unset), got {self.target_kl}")
         if not (0 < self.gamma <= 1 and 0 < self.gae_lambda <= 1 and self.learning_rate > 0 and self.clip_range > 0):
             raise ValueError("gamma and gae_lambda must be in (0, 1], learning_rate and clip_range > 0")
         self.env_config().sim_config()  # validates the scenario, crowd size (against the group sizes), rewards
@@ -141,7 +144,8 @@ def make_model(cfg: TrainConfig, vec_env: Any, out: Path) -> Any:
                      "net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": cfg.log_std_init}
     return PPO("MultiInputPolicy", vec_env, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-               ent_coef=cfg.ent_coef, policy_kwargs=policy_kwargs, seed=cfg.seed, device="cpu", verbose=0)
+               ent_coef=cfg.ent_coef, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs, seed=cfg.seed,
+               device="cpu", verbose=0)
 
 
 def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None) -> dict[str, Any]:
@@ -161,8 +165,8 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     info: dict[str, Any] = {"demo_steps": len(demos.actions), "demo_episodes": len(demos.episode_seed),
                             "demo_success_rate": demos.success_rate}
     losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, reset_log_std=cfg.log_std_init, seed=cfg.seed)
-    print(f"behaviour cloning: {len(demos.actions)} demo steps ({demos.success_rate:.2f} expert success), "
-          f"loss {losses[0]:.3f} -> {losses[-1]:.3f}", flush=True)
+    print(f"behaviour cloning: {len(demos.actions)} labelled steps (success in their episodes "
+          f"{demos.success_rate:.2f}), loss {losses[0]:.3f} -> {losses[-1]:.3f}", flush=True)
     rounds = []
     for r in range(cfg.dagger_rounds if cfg.warm_start == "dagger" else 0):
         seed = cfg.demo_seed + cfg.demo_episodes + r * cfg.dagger_episodes
@@ -227,7 +231,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--demos", type=Path, default=None, metavar="NPZ", help="reuse demonstrations for --warm-start bc")
     flags = {"scenario": str, "pedestrians": int, "time_limit_s": float, "max_pedestrians": int,
              "total_steps": int, "seed": int, "envs": int, "workers": int, "n_steps": int, "batch_size": int,
-             "n_epochs": int, "learning_rate": float, "gamma": float, "ent_coef": float, "log_std_init": float,
+             "n_epochs": int, "learning_rate": float, "gamma": float, "ent_coef": float,
+             "target_kl": float, "log_std_init": float,
              "warm_start": str, "demo_policy": str, "demo_episodes": int, "bc_epochs": int, "dagger_rounds": int,
              "dagger_episodes": int,
              "eval_every_steps": int, "eval_episodes": int, "eval_seed": int, "checkpoint_every_steps": int,

@@ -148,11 +148,12 @@ class TrainMonitor(BaseCallback):
 
     def finish(self, model: Any) -> None:
         self.model = model
-        self.checkpoint()
-        if model.num_timesteps > 0 and (self.out / "eval.csv").exists():
-            last = list(csv.DictReader((self.out / "eval.csv").open()))[-1]
-            if int(last["steps"]) < model.num_timesteps:
-                self.evaluate(model)
+        last = list(csv.DictReader((self.out / "eval.csv").open()))[-1] if (self.out / "eval.csv").exists() else None
+        if last is None or int(last["steps"]) < model.num_timesteps:
+            self.evaluate(model)
+        steps = model.num_timesteps
+        self.next_eval = max(self.next_eval, (steps // self.cfg.eval_every_steps + 1) * self.cfg.eval_every_steps)
+        self.checkpoint()  # after the last evaluation, so that a resume does not repeat it
         save_agent(model, self.out / "final.zip", self.env_config, self._meta(model))
         print(f"done: {model.num_timesteps} steps in {_hms(self.wall_s)}; agent {self.out / 'final.zip'}, "
               f"best {self.out / 'checkpoints' / 'best.zip'} (success {self.best_success:.2f})", flush=True)

@@ -201,3 +201,15 @@ def test_a_corrupt_agent_file_is_one_line_on_the_command_line(tmp_path, capsys):
     assert main([*argv, "--policy", f"sb3:{bad}"]) == 2
     err = capsys.readouterr().err
     assert "cannot load" in err and len(err.strip().splitlines()) == 1
+
+
+def test_packaged_ppo_agent_crosses_the_circle_on_unseen_seeds():
+    """`ppo-crowdnav` loads by name and reaches the goal in most unseen circle-crossing episodes (5 invisible
+    pedestrians, the setting it was trained in; RESULTS.md reports 500 episodes). Seeds 400000+: never used in
+    training (its resets draw from seeds 0-7) or in its checkpoint selection (100000+)."""
+    from envs.evaluate import evaluate
+    from envs.policies import PolicyConfig
+
+    cfg = CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, robot_visible=False)
+    res = evaluate(PolicyConfig("ppo-crowdnav"), cfg, episodes=20, seed=400_000, record=0, progress=False)
+    assert res["policy"] == "ppo-crowdnav" and res["success_rate"] >= 0.75
