@@ -20,7 +20,9 @@ def read_run(path: Path) -> tuple[str, dict[str, list[float]]]:
     if not rows:
         raise ValueError(f"{path}/eval.csv has no rows")
     cfg = json.loads((path / "config.json").read_text())
-    label = f"{path.name} (warm start: {cfg['warm_start']})"
+    inputs = ("groups" if cfg["groups"] else "no groups") + (", predictions" if cfg["predictions"] else "")
+    label = (f"{path.name}: warm start {cfg['warm_start']}, lr {cfg['learning_rate']:g}, "
+             f"target_kl {cfg.get('target_kl')}, {inputs}")
     return label, {k: [float(r[k]) for r in rows] for k in ("steps", "wall_s", "success", "collision")}
 
 
@@ -28,10 +30,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", type=Path, nargs="+")
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--extra-wall", action="append", default=[], metavar="RUN=SECONDS",
+                    help="add SECONDS to RUN's wall time (e.g. a warm start computed in another run)")
     ap.add_argument("--title", default="PPO on circle_crossing, 5 invisible pedestrians")
     args = ap.parse_args(argv)
     try:
         runs = [read_run(r) for r in args.runs]
+        for item in args.extra_wall:
+            name, _, secs = item.partition("=")
+            for label, d in runs:
+                if label.startswith(name + ":"):
+                    d["wall_s"] = [w + float(secs) for w in d["wall_s"]]
     except (OSError, ValueError, KeyError) as exc:
         print(f"plot_learning_curves: error: {exc}", file=sys.stderr)
         return 2
@@ -40,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
     for label, d in runs:
         line = axes[0].plot([s / 1e6 for s in d["steps"]], d["success"], label=label)[0]
         axes[0].plot([s / 1e6 for s in d["steps"]], d["collision"], ls="--", color=line.get_color())
@@ -49,9 +58,9 @@ def main(argv: list[str] | None = None) -> int:
     axes[1].set(xlabel="wall time incl. warm start (min)", ylabel="success rate", ylim=(0, 1))
     for ax in axes:
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", fontsize=8, ncol=1)
     fig.suptitle(args.title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.08 + 0.035 * len(runs), 1, 1))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=110)
     print(f"wrote {args.out}")

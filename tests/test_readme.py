@@ -118,6 +118,13 @@ def _small(argv: list[str], shared: Path, tmp_path: Path) -> list[str] | None:
         if tok in ("rec.txt", "groups.txt"):
             tok = str(tmp_path / tok)
         out.append(tok)
+    if argv[:2] == ["crowdnav", "train"]:  # a few hundred steps; a cheap expert for the warm start
+        steps = "512" if "--resume" in argv else "256"
+        out = [steps if prev == "--steps" else tok for prev, tok in zip(["", *out[:-1]], out, strict=True)]
+        if "--resume" not in argv:
+            out += ["--envs", "2", "--n-steps", "128", "--batch-size", "64", "--n-epochs", "1", "--eval-episodes", "1",
+                    "--eval-every-steps", "256", "--demo-episodes", "1", "--dagger-rounds", "1", "--dagger-episodes",
+                    "1", "--bc-epochs", "1", "--demo-policy", "mpc-cv"]
     if argv[:2] == ["crowdnav", "benchmark"]:  # the smallest cell of the suite and the cheapest policies
         out[out.index("--cells") + 1] = "corridor-low-visible"
         out[out.index("--policy") + 1: out.index("--policy") + 5] = ["mpc-cv", "social-force"]
