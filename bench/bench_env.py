@@ -51,12 +51,13 @@ TARGET_STEPS_PER_S = 2000.0
 TARGET_ONE_PROCESS = 3000.0  # issue 13 item 5: plaza, 20 pedestrians, one process
 TARGET_AGGREGATE = 5000.0  # ... and with 2 worker processes in aggregate
 # The same measurements on the code before the throughput work (issue 13 item 5), 2026-11-23, 2-core sandbox,
-# load 0.5-1.7 (2 workers: 3.6-3.8): steps/s (wall) excluding / including resets, mean reset ms, bare crowdsim
-# steps/s; and with 2 workers, the aggregate including resets and the summed rates excluding them.
+# load 0.5-1.7: steps/s (wall) excluding / including resets, mean reset ms, bare crowdsim steps/s; and with
+# 2 workers, the aggregate including resets and the summed rates excluding them (load ~1.1: this script run on
+# a `git archive` of commit 2711a6f, the last one before the throughput work, with PYTHONPATH pointing at it).
 REFERENCE: dict[str, dict[str, float]] = {
     "20": {"excl_wall": 1764.0, "incl_wall": 1636.0, "reset_ms": 8.2, "bare_wall": 4740.0},
     "50": {"excl_wall": 1325.0, "incl_wall": 1163.0, "reset_ms": 12.8, "bare_wall": 3319.0},
-    "workers2_n20": {"incl_wall": 1572.0, "excl_wall": 1710.0},  # load 3.6-3.8: training on the other core
+    "workers2_n20": {"incl_wall": 3370.0, "excl_wall": 3694.0},
 }
 
 
