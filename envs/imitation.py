@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.policies import PolicyConfig, make_policy
@@ -41,8 +42,15 @@ class Demos:
         return float(np.mean(self.episode_outcome == "success")) if len(self.episode_outcome) else 0.0
 
     def save(self, path: str | Path) -> None:
-        np.savez_compressed(path, actions=self.actions, returns=self.returns, episode_outcome=self.episode_outcome,
-                            episode_seed=self.episode_seed, **{f"obs.{k}": v for k, v in self.obs.items()})
+        """Written atomically (`envs.atomic`): a reader sees the old file or the complete new one."""
+        arrays = {"actions": self.actions, "returns": self.returns, "episode_outcome": self.episode_outcome,
+                  "episode_seed": self.episode_seed, **{f"obs.{k}": v for k, v in self.obs.items()}}
+
+        def write(tmp: str) -> None:
+            with open(tmp, "wb") as f:  # a file object: np.savez would append .npz to a bare name
+                np.savez_compressed(f, **arrays)
+
+        write_atomic(path, write)
 
     @classmethod
     def load(cls, path: str | Path) -> Demos:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 import time
 import tomllib
@@ -47,7 +48,7 @@ class TrainConfig:
     total_steps: int = 1_000_000
     seed: int = 0
     envs: int = 8                     # parallel envs in the rollout
-    workers: int = 1                  # processes stepping them (1: all in this process)
+    workers: int = 1                  # 1: all envs in this process; = envs: one subprocess per env (SB3)
     n_steps: int = 256                # rollout length per env
     batch_size: int = 256
     n_epochs: int = 10
@@ -80,8 +81,9 @@ class TrainConfig:
                 raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
-        if self.workers > self.envs:
-            raise ValueError(f"workers ({self.workers}) must not exceed envs ({self.envs})")
+        if self.workers not in (1, self.envs):
+            raise ValueError(f"workers must be 1 (all envs in this process) or equal to envs ({self.envs}: one "
+                             f"subprocess per env, SB3's SubprocVecEnv), got {self.workers}")
         if self.target_kl is not None and not self.target_kl > 0:
             raise ValueError(f"target_kl must be > 0 (or unset), got {self.target_kl}")
         if not (0 < self.gamma <= 1 and 0 < self.gae_lambda <= 1 and self.learning_rate > 0 and self.clip_range > 0):
@@ -134,7 +136,7 @@ def make_vec_env(cfg: TrainConfig) -> Any:
                             env_kwargs={"config": env_cfg}, vec_env_kwargs=kwargs)
 
 
-def make_model(cfg: TrainConfig, vec_env: Any, out: Path) -> Any:
+def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
     from stable_baselines3 import PPO
 
     from envs.extractor import CrowdAttentionExtractor
@@ -154,7 +156,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     demos' own) and cloning on the aggregate (saved to out/dagger.npz)."""
     from envs.imitation import Demos, behaviour_clone, collect_demos, concat
 
-    start, workers = time.perf_counter(), max(2, cfg.workers)
+    start, workers = time.perf_counter(), min(max(2, cfg.workers), os.cpu_count() or 2)
     if demos_path is not None:
         demos = Demos.load(demos_path)
     else:
@@ -194,7 +196,7 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
     out.mkdir(parents=True, exist_ok=True)
     vec_env = make_vec_env(cfg)
     try:
-        model = make_model(cfg, vec_env, out)
+        model = make_model(cfg, vec_env)
         formats = ["csv", "tensorboard"] if tensorboard_available() else ["csv"]
         model.set_logger(configure(str(out / "tb"), formats))
         monitor = TrainMonitor(cfg, out)
@@ -221,6 +223,19 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
         return 1
     finally:
         vec_env.close()
+
+
+def check_demos(path: Path, cfg: TrainConfig) -> None:
+    """ValueError unless `path` holds demonstrations recorded in this run's observation layout."""
+    from envs.imitation import Demos
+    from envs.observation import observation_space
+
+    demos = Demos.load(path)
+    space = observation_space(cfg.env_config())
+    want = {k: tuple(b.shape) for k, b in space.spaces.items()}
+    have = {k: tuple(v.shape[1:]) for k, v in demos.obs.items()}
+    if want != have:
+        raise ValueError(f"--demos {path}: recorded with observation {have}, this run observes {want}")
 
 
 # ------------------------------------------------------------------------------------------ command line
@@ -282,6 +297,8 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
     cfg = TrainConfig.from_json(data)
     if args.demos is not None and cfg.warm_start == "none":
         raise ValueError("--demos is used only with --warm-start bc or dagger")
+    if args.demos is not None:
+        check_demos(args.demos, cfg)
     out = args.resume or args.out or Path("out/train") / cfg.scenario
     if args.resume is None and (out / "checkpoints" / "latest.zip").exists():
         raise ValueError(f"{out} already holds a run; use --resume {out} or another --out")

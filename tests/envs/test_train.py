@@ -142,7 +142,8 @@ def test_diverged_training_stops_and_keeps_the_last_good_checkpoint(tmp_path, mo
     (["--envs", "0"], "envs must be an integer >= 1"),
     (["--demos", "x.npz"], "--demos is used only with --warm-start"),
     (["--scenario", "nowhere"], "unknown scenario"),
-    (["--workers", "4", "--envs", "2"], "must not exceed envs"),
+    (["--workers", "4", "--envs", "2"], "workers must be 1"),
+    (["--workers", "2", "--envs", "8"], "workers must be 1"),
 ])
 def test_train_misuse_is_one_line_and_writes_nothing(tmp_path, capsys, argv, message):
     out = tmp_path / "run"
@@ -213,3 +214,24 @@ def test_packaged_ppo_agent_crosses_the_circle_on_unseen_seeds():
     cfg = CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, robot_visible=False)
     res = evaluate(PolicyConfig("ppo-crowdnav"), cfg, episodes=20, seed=400_000, record=0, progress=False)
     assert res["policy"] == "ppo-crowdnav" and res["success_rate"] >= 0.75
+
+
+def test_demos_of_another_layout_are_refused_before_any_work(tmp_path, capsys):
+    from envs.imitation import Demos
+
+    p = 8
+    demos = Demos({"robot": np.zeros((3, 7), np.float32), "pedestrians": np.zeros((3, p, 5), np.float32),
+                   "pedestrian_mask": np.zeros((3, p), np.float32), "group_ids": np.zeros((3, p), np.float32)},
+                  np.zeros((3, 2), np.float32), np.zeros(3, np.float32), np.array(["success"]), np.array([0]))
+    path = tmp_path / "demos.npz"
+    demos.save(path)
+    back = Demos.load(path)
+    assert np.array_equal(back.obs["pedestrians"], demos.obs["pedestrians"])
+    assert list(back.episode_outcome) == ["success"]
+    out = tmp_path / "run"
+    assert main(["train", "--warm-start", "bc", "--demos", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "recorded with observation" in err and len(err.strip().splitlines()) == 1 and not out.exists()
+    (tmp_path / "junk.npz").write_bytes(b"junk")
+    assert main(["train", "--warm-start", "bc", "--demos", str(tmp_path / "junk.npz"), "--out", str(out)]) == 2
+    assert "not a demonstrations file" in capsys.readouterr().err and not out.exists()
