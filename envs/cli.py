@@ -58,6 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--pedestrians", type=int, default=None, help="crowd size (simulated scenarios; default 24)")
     e.add_argument("--invisible", action="store_true", help="pedestrians do not see the robot (simulated scenarios)")
     e.add_argument("--time-limit", type=float, default=None, metavar="S", help="episode time limit, s (default 40)")
+    e.add_argument("--wall-rays", type=int, default=None, metavar="R",
+                   help="observe R range rays to the walls (for agents trained with crowdnav train --wall-rays R)")
     e.add_argument("--record", type=int, default=2, metavar="R", help="rerun recordings of the first R episodes")
     e.add_argument("--replay-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: ETH/UCY-format trajectory file (frame ped x y)")
@@ -126,6 +128,10 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
         kw["groups"] = replace(GroupConfig(), max_size=max(1, min(GroupConfig().max_size, args.pedestrians)))
     if args.time_limit is not None:
         kw["time_limit_s"] = args.time_limit
+    if args.wall_rays is not None:
+        from envs.config import ObservationConfig
+
+        kw["observation"] = ObservationConfig(wall_rays=args.wall_rays)
     config = CrowdNavConfig(**kw)
     if not replay:
         config.sim_config()  # validates the crowd settings before any worker starts

@@ -67,6 +67,9 @@ class ObservationConfig:
     predictions: include the predictor's sampled futures (K, 12, P, 2) in the observation.
     n_prediction_samples: K in the observation.
     predictor: predictor name or checkpoint path, used only for predicted groups or predictions.
+    wall_rays: R range rays around the robot (0: no `walls` key); ray k points 360 k / R degrees left of the
+        robot's heading (holonomic: of +x).
+    wall_range_m: a ray that meets no wall within this range reads it, m.
     """
 
     max_pedestrians: int = 20
@@ -77,13 +80,17 @@ class ObservationConfig:
     predictions: bool = False
     n_prediction_samples: int = 3
     predictor: str = "gpgraph-stgcnn-synthetic"
+    wall_rays: int = 0
+    wall_range_m: float = 5.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.wall_rays, int) or self.wall_rays < 0:
+            raise ValueError(f"wall_rays must be an integer >= 0, got {self.wall_rays!r}")
         if self.max_pedestrians < 1:
             raise ValueError(f"max_pedestrians must be >= 1, got {self.max_pedestrians}")
         if self.n_prediction_samples < 1:
             raise ValueError(f"n_prediction_samples must be >= 1, got {self.n_prediction_samples}")
-        _positive(self, ("sensor_range_m", "position_bound_m", "speed_bound_mps"))
+        _positive(self, ("sensor_range_m", "position_bound_m", "speed_bound_mps", "wall_range_m"))
         if self.group_source not in GROUP_SOURCES:
             raise ValueError(f"unknown group_source {self.group_source!r}; valid: {', '.join(GROUP_SOURCES)}")
 

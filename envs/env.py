@@ -328,7 +328,7 @@ class CrowdNavEnv(gym.Env):
                 groups = self._pred_groups
         time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
-                                 p.pos, p.vel, p.radius, groups, samples)
+                                 p.pos, p.vel, p.radius, groups, samples, self._walls.segments)
 
     def _facts(self, before_pos: np.ndarray, before: CrowdState, dist_before: float) -> StepFacts:
         """Distances, contact and intrusion of the step just simulated (`before`: the crowd at its start)."""

@@ -4,7 +4,8 @@ In the spirit of SARL (Chen et al. 2019) and CrowdNav++ (Liu et al. 2023): every
 embedded together with the robot's own state, optionally with the pooled embedding of its group (rows with the
 same `group_ids`) and with its predicted future (`predictions`, K samples x 12 steps), and the rows are pooled
 by attention scores computed against the crowd's mean. Padding rows (`pedestrian_mask` 0) get no weight, so the
-weights do not depend on P or on the row order, and an empty scene gives a zero crowd feature.
+weights do not depend on P or on the row order, and an empty scene gives a zero crowd feature. Wall range
+rays (`walls`, if observed) are appended to the robot's own features.
 
 Used through `policy_kwargs=dict(features_extractor_class=CrowdAttentionExtractor,
 features_extractor_kwargs=dict(use_groups=True, use_predictions=False))`. torch enters `envs` only here and
@@ -47,7 +48,10 @@ class CrowdAttentionExtractor(BaseFeaturesExtractor):
         if use_predictions and "predictions" not in observation_space.spaces:
             raise ValueError("use_predictions needs predictions in the observation (ObservationConfig.predictions)")
         self.use_groups, self.use_predictions = use_groups, use_predictions
+        self.wall_range = float(observation_space["walls"].high[0]) if "walls" in observation_space.spaces else None
         robot_in = observation_space["robot"].shape[0]
+        if self.wall_range is not None:  # range rays join the robot's own features
+            robot_in += observation_space["walls"].shape[0]
         row_in = 6 + robot_in  # x, y, vx, vy, radius, distance + the robot's own state
         if use_predictions:
             k, t = observation_space["predictions"].shape[:2]
@@ -68,6 +72,8 @@ class CrowdAttentionExtractor(BaseFeaturesExtractor):
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         robot = self.scaled_robot(obs["robot"])
+        if self.wall_range is not None:
+            robot = torch.cat([robot, obs["walls"] / self.wall_range], dim=-1)
         peds, mask = obs["pedestrians"], obs["pedestrian_mask"] > 0.5  # (B, P, 5), (B, P)
         dist = torch.linalg.norm(peds[..., :2], dim=-1, keepdim=True) / POS_SCALE_M
         rows = [peds[..., :2] / POS_SCALE_M, peds[..., 2:], dist, robot[:, None].expand(-1, peds.shape[1], -1)]

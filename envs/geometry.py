@@ -34,6 +34,22 @@ def point_segment_distances(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
     return np.linalg.norm(p - closest, axis=1)
 
 
+def ray_distances(origin: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: float) -> np.ndarray:
+    """Range readings (R,) m: how far each ray from origin (2,) at angles (R,) rad (world frame) travels before it
+    meets a segment of segs (S, 2, 2); max_range where it meets none within max_range."""
+    d = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (R, 2)
+    if len(segs) == 0:
+        return np.full(len(d), float(max_range))
+    a, e = segs[:, 0], segs[:, 1] - segs[:, 0]  # (S, 2)
+    w = a - origin
+    denom = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]  # cross(d, e): (R, S)
+    safe = np.where(np.abs(denom) > 1e-12, denom, 1.0)
+    t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / safe  # along the ray, m
+    u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / safe  # along the segment, 0..1
+    hit = (np.abs(denom) > 1e-12) & (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
+    return np.minimum(np.where(hit, t, np.inf).min(axis=1), float(max_range))
+
+
 class WallIndex:
     """Static wall segments (S, 2, 2) m with their bounding boxes, for the per-step robot-wall contact test."""
 

@@ -6,7 +6,8 @@ concatenates the keys in the same order) lays them out one after the other, each
 
     group_ids (P,) | pedestrian_mask (P,) | pedestrians (P, 5) | predictions (K, 12, P, 2), if observed | robot (7,)
 
-With the defaults (P = 20, no predictions) that is 20 + 20 + 100 + 7 = 147 values: group_ids 0-19,
+and, with `wall_rays` R > 0, `walls` (R,) last. With the defaults (P = 20, no predictions, no wall rays) that is
+20 + 20 + 100 + 7 = 147 values: group_ids 0-19,
 pedestrian_mask 20-39, pedestrians 40-139 (row i at 40 + 5 i: x, y, vx, vy, radius) and robot 140-146.
 `field_names(config)` names every index; `layout_table(config)` prints them as a table.
 """
@@ -63,6 +64,8 @@ def field_names(config: CrowdNavConfig) -> list[str]:
             names += [f"robot.{f}" for f in ROBOT_FIELDS[config.robot.model]]
         elif b.key == "pedestrians":
             names += [f"pedestrians[{i}].{f}" for i in range(b.shape[0]) for f in PED_FIELDS]
+        elif b.key == "walls":
+            names += [f"walls[{k}].range_m" for k in range(b.shape[0])]
         elif b.key == "predictions":
             k, t, p, _ = b.shape
             names += [f"predictions[{s}][t={j}][{i}].{c}_m" for s in range(k) for j in range(t) for i in range(p)
@@ -88,7 +91,7 @@ def layout_table(config: CrowdNavConfig) -> str:
     rows = ["| key | flat indices | shape | fields |", "|---|---|---|---|"]
     per_key = {"robot": ", ".join(ROBOT_FIELDS[config.robot.model]), "pedestrians": ", ".join(PED_FIELDS),
                "pedestrian_mask": "1 real row, 0 padding", "group_ids": "0..G-1 by first appearance, -1 padding",
-               "predictions": "x_m, y_m (robot frame)"}
+               "predictions": "x_m, y_m (robot frame)", "walls": "range_m of ray k at 360 k / R deg"}
     for b in blocks(config):
         rows.append(f"| {b.key} | {b.start}-{b.stop - 1} | {b.shape} | {per_key[b.key]} |")
     return "\n".join(rows)

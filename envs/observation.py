@@ -11,6 +11,8 @@ Keys (P = max_pedestrians, K = n_prediction_samples):
         predicted, by config); -1 for padding.
     predictions (K, 12, P, 2), only if configured: sampled futures at +0.4 ... +4.8 s relative to the
         robot, in the robot frame, m; padding rows are 0.
+    walls (R,), only if `wall_rays` > 0: range readings to the scene's walls, ray k at 360 k / R degrees left of
+        the heading (holonomic: of +x), m, wall_range_m where no wall is within range.
 Every value is clipped to its Box, so nothing is ever out of bounds.
 """
 
@@ -20,6 +22,7 @@ import numpy as np
 from gymnasium import spaces
 
 from envs.config import CrowdNavConfig
+from envs.geometry import ray_distances
 from envs.timing import DEFAULT_TIMING
 
 PRED_LEN = DEFAULT_TIMING.pred_len
@@ -41,6 +44,8 @@ def observation_space(cfg: CrowdNavConfig) -> spaces.Dict:
     }
     if obs.predictions:
         items["predictions"] = spaces.Box(-pb, pb, (obs.n_prediction_samples, PRED_LEN, p, 2), np.float32)
+    if obs.wall_rays:
+        items["walls"] = spaces.Box(0.0, obs.wall_range_m, (obs.wall_rays,), np.float32)
     return spaces.Dict(items)
 
 
@@ -76,9 +81,11 @@ def nearest_rows(robot_pos: np.ndarray, pos: np.ndarray, cfg: CrowdNavConfig) ->
 
 def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.ndarray, goal: np.ndarray,
                       time_left: float, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray,
-                      group_id: np.ndarray, samples: np.ndarray | None) -> dict[str, np.ndarray]:
+                      group_id: np.ndarray, samples: np.ndarray | None,
+                      walls: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """The observation dict from the robot state (state_dim,), goal (2,), time left as a fraction, the
-    pedestrians pos/vel (n, 2), radius (n,), group ids (n,), and predicted samples (K, 12, n, 2) or None."""
+    pedestrians pos/vel (n, 2), radius (n,), group ids (n,), predicted samples (K, 12, n, 2) or None, and
+    the wall segments (S, 2, 2) m (read only when the space has `walls`)."""
     p = cfg.observation.max_pedestrians
     unicycle = cfg.robot.model == "unicycle"
     rot = rotation(float(robot_state[2])) if unicycle else np.eye(2)
@@ -104,5 +111,11 @@ def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.n
         if samples is not None and n:
             pred[:, :, :n] = (samples[:k, :, rows] - here) @ rot.T
         out["predictions"] = pred
+    if "walls" in space.spaces:
+        r = cfg.observation.wall_rays
+        heading = float(robot_state[2]) if unicycle else 0.0
+        segs = np.zeros((0, 2, 2)) if walls is None else np.asarray(walls, float).reshape(-1, 2, 2)
+        out["walls"] = ray_distances(here, heading + 2.0 * np.pi * np.arange(r) / r, segs,
+                                     cfg.observation.wall_range_m)
     bounds = _bounds(space)
     return {key: np.clip(val, *bounds[key]).astype(np.float32) for key, val in out.items()}

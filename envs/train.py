@@ -44,6 +44,7 @@ class TrainConfig:
     max_pedestrians: int = 20         # P rows in the observation
     groups: bool = True               # the extractor pools rows by group id
     predictions: bool = False         # predicted futures in the observation and the extractor
+    wall_rays: int = 0                # range rays to the walls in the observation (0: none)
     rewards: tuple[tuple[str, float], ...] = ()  # RewardWeights overrides, e.g. (("collision", -20.0),)
     total_steps: int = 1_000_000
     seed: int = 0
@@ -84,6 +85,8 @@ class TrainConfig:
         if self.workers not in (1, self.envs):
             raise ValueError(f"workers must be 1 (all envs in this process) or equal to envs ({self.envs}: one "
                              f"subprocess per env, SB3's SubprocVecEnv), got {self.workers}")
+        if not isinstance(self.wall_rays, int) or self.wall_rays < 0:
+            raise ValueError(f"wall_rays must be an integer >= 0, got {self.wall_rays!r}")
         if self.target_kl is not None and not self.target_kl > 0:
             raise ValueError(f"target_kl must be > 0 (or unset), got {self.target_kl}")
         if not (0 < self.gamma <= 1 and 0 < self.gae_lambda <= 1 and self.learning_rate > 0 and self.clip_range > 0):
@@ -98,7 +101,8 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown reward term(s) {unknown}; valid: {', '.join(names)}")
         weights = replace(RewardWeights(), **{names[k]: float(v) for k, v in self.rewards})
-        obs = ObservationConfig(max_pedestrians=self.max_pedestrians, predictions=self.predictions)
+        obs = ObservationConfig(max_pedestrians=self.max_pedestrians, predictions=self.predictions,
+                                wall_rays=self.wall_rays)
         return CrowdNavConfig(scenario=self.scenario, n_pedestrians=self.pedestrians,
                               robot_visible=not self.invisible, time_limit_s=self.time_limit_s, rewards=weights,
                               observation=obs)
@@ -244,7 +248,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, metavar="DIR", help="run folder (default out/train/<scenario>)")
     p.add_argument("--resume", type=Path, default=None, metavar="DIR", help="resume the run in DIR")
     p.add_argument("--demos", type=Path, default=None, metavar="NPZ", help="reuse demonstrations for --warm-start bc")
-    flags = {"scenario": str, "pedestrians": int, "time_limit_s": float, "max_pedestrians": int,
+    flags = {"scenario": str, "pedestrians": int, "time_limit_s": float, "max_pedestrians": int, "wall_rays": int,
              "total_steps": int, "seed": int, "envs": int, "workers": int, "n_steps": int, "batch_size": int,
              "n_epochs": int, "learning_rate": float, "gamma": float, "ent_coef": float,
              "target_kl": float, "log_std_init": float,

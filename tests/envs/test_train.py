@@ -235,3 +235,45 @@ def test_demos_of_another_layout_are_refused_before_any_work(tmp_path, capsys):
     (tmp_path / "junk.npz").write_bytes(b"junk")
     assert main(["train", "--warm-start", "bc", "--demos", str(tmp_path / "junk.npz"), "--out", str(out)]) == 2
     assert "not a demonstrations file" in capsys.readouterr().err and not out.exists()
+
+
+def test_wall_rays_read_the_distance_to_the_walls():
+    from envs.geometry import ray_distances
+
+    corridor = np.array([[[-10.0, 0.0], [10.0, 0.0]], [[-10.0, 2.0], [10.0, 2.0]]])  # walls at y = 0 and y = 2
+    angles = np.array([0.0, np.pi / 2, np.pi, -np.pi / 2, np.pi / 4])
+    got = ray_distances(np.array([1.0, 0.5]), angles, corridor, 5.0)
+    np.testing.assert_allclose(got, [5.0, 1.5, 5.0, 0.5, 1.5 * np.sqrt(2)], atol=1e-12)
+    assert np.all(ray_distances(np.zeros(2), angles, np.zeros((0, 2, 2)), 3.0) == 3.0)
+    cfg = CrowdNavConfig(scenario="corridor", n_pedestrians=6, observation=ObservationConfig(wall_rays=8))
+    env = CrowdNavEnv(cfg)
+    obs, _ = env.reset(seed=2)
+    assert obs["walls"].shape == (8,) and env.observation_space.contains(obs)
+    x, y, heading = env.robot_state[:3]
+    segs = np.asarray(env.crowd.walls, float).reshape(-1, 2, 2)
+    left = ray_distances(np.array([x, y]), np.array([heading + np.pi / 2]), segs, 5.0)[0]
+    assert obs["walls"][2] == pytest.approx(left, abs=1e-5)  # ray 2 of 8 points 90 degrees left
+    assert min(obs["walls"]) < 5.0  # a corridor robot sees a wall within 5 m
+    assert field_names(cfg)[-8:] == [f"walls[{k}].range_m" for k in range(8)]
+    assert "walls" not in CrowdNavEnv(CrowdNavConfig()).observation_space.spaces  # the default layout is unchanged
+    torch.manual_seed(0)
+    ext = CrowdAttentionExtractor(env.observation_space)
+    batch = {k: torch.as_tensor(v)[None] for k, v in obs.items()}
+    moved = dict(batch, walls=batch["walls"] * 0.5)
+    assert not torch.allclose(ext(batch), ext(moved))  # the rays reach the features
+    with pytest.raises(ValueError, match="wall_rays"):
+        ObservationConfig(wall_rays=-1)
+
+
+@pytest.mark.slow
+def test_an_agent_trained_with_wall_rays_is_evaluated_with_them(tmp_path, capsys):
+    from dataclasses import replace
+
+    cfg = replace(TINY, scenario="corridor", pedestrians=6, wall_rays=8, total_steps=256)
+    assert train(cfg, tmp_path / "run") == 0
+    argv = ["evaluate", "--policy", f"sb3:{tmp_path / 'run' / 'final.zip'}", "--scenario", "corridor",
+            "--pedestrians", "6", "--episodes", "1", "--workers", "1", "--record", "0", "--no-progress",
+            "--time-limit", "6", "--out", str(tmp_path / "eval")]
+    capsys.readouterr()
+    assert main(argv) == 2 and "key 'walls' only in the agent's observation" in capsys.readouterr().err
+    assert main([*argv, "--wall-rays", "8"]) == 0
