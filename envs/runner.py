@@ -53,17 +53,23 @@ def fingerprint(*parts: Any) -> str:
 
 
 def record_of(task: EpisodeTask, result: Any, policy_name: str) -> EpisodeRecord:
-    """The typed record of an `envs.rollout.EpisodeResult`."""
+    """The typed record of an `envs.rollout.EpisodeResult` run for `task`."""
+    return episode_record(result, policy_name, task.seed, task.cell, task.fingerprint)
+
+
+def episode_record(result: Any, policy_name: str, seed: int, cell: str = "", fingerprint: str = "") -> EpisodeRecord:
+    """The typed record of an `envs.rollout.EpisodeResult` (also for episodes run outside a task, e.g. the
+    training evaluation of `envs.train_monitor`)."""
     m = result.metrics
     return EpisodeRecord(
-        policy=policy_name, seed=int(task.seed), outcome=m["outcome"], cell=task.cell,
+        policy=policy_name, seed=int(seed), outcome=m["outcome"], cell=cell,
         collision_with=m["collision_with"] or None, collision_kind=m["collision_kind"] or None,
         collision_time_s=finite_or_none(m["collision_time_s"]), steps=int(m["steps"]), time_s=float(m["time_s"]),
         time_to_goal_s=finite_or_none(m["time_to_goal_s"]), path_length_m=float(m["path_length_m"]),
         min_distance_m=finite_or_none(m["min_distance_m"]), discomfort_frequency=float(m["discomfort_frequency"]),
         group_intrusion=bool(m["group_intrusion"]), intrusion_fraction=float(m["intrusion_fraction"]),
         plans=int(m["plans"]), fallbacks=int(m["fallbacks"]), ret=float(result.ret),
-        wall_time_s=float(result.wall_time_s), fingerprint=task.fingerprint,
+        wall_time_s=float(result.wall_time_s), fingerprint=fingerprint,
         solve_times_ms=tuple(float(t) for t in result.solve_times_ms))
 
 

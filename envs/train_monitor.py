@@ -16,7 +16,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 from envs.atomic import write_json_atomic
 from envs.env import CrowdNavEnv
 from envs.rollout import run_episode
+from envs.runner import episode_record
 from envs.sb3_io import load_parameters, save_agent
+from envs.stats import aggregate
 
 EVAL_FIELDS = ("steps", "wall_s", "success", "collision", "timeout", "mean_return", "time_to_goal_s",
                "intrusion", "min_distance_m")
@@ -103,15 +105,14 @@ class TrainMonitor(BaseCallback):
         """Deterministic episodes on the eval seeds, harness metrics; appends a row to eval.csv."""
         policy = ModelPolicy(model)
         seeds = range(self.cfg.eval_seed, self.cfg.eval_seed + self.cfg.eval_episodes)
-        res = [run_episode(self.env_config, "", s, env=self.eval_env, policy=policy) for s in seeds]
-        m = [r.metrics for r in res]
-        succ = [x for x in m if x["success"]]
+        records = [episode_record(run_episode(self.env_config, "", s, env=self.eval_env, policy=policy), policy.name, s)
+                   for s in seeds]
+        summary = aggregate(records)  # the harness's own definitions (envs.stats)
+        keys = {"success": "success_rate", "collision": "collision_rate", "timeout": "timeout_rate",
+                "mean_return": "mean_return", "time_to_goal_s": "time_to_goal_s", "intrusion": "group_intrusion_rate",
+                "min_distance_m": "min_distance_m"}
         row = {"steps": model.num_timesteps, "wall_s": round(self.wall_s, 1),
-               "success": np.mean([x["success"] for x in m]), "collision": np.mean([x["collision"] for x in m]),
-               "timeout": np.mean([x["timeout"] for x in m]), "mean_return": np.mean([r.ret for r in res]),
-               "time_to_goal_s": np.mean([x["time_to_goal_s"] for x in succ]) if succ else float("nan"),
-               "intrusion": np.mean([x["group_intrusion"] for x in m]),
-               "min_distance_m": np.mean([min(x["min_distance_m"], 99.0) for x in m])}
+               **{k: float("nan") if summary[v] is None else summary[v] for k, v in keys.items()}}
         path = self.out / "eval.csv"
         new = not path.exists()
         with path.open("a", newline="") as f:
