@@ -46,21 +46,16 @@ LOAD_ERRORS = (ValueError, RuntimeError, KeyError, TypeError, EOFError, OSError,
 _BOX_RE = re.compile(r"'(\w+)': Box\([^()]*?\((\d+(?:, \d+)*),?\), \w+\)")
 
 
-def read_data(path: Path) -> dict[str, Any]:
-    """The JSON "data" entry of an SB3 file; ValueError when the file is not one."""
+def read_agent(path: Path) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The JSON "data" entry of an SB3 file and its `crowdnav.json` entry (signature and metadata; None for
+    agents not saved here), in one read; ValueError when the file is not an SB3 model."""
     try:
         with zipfile.ZipFile(path) as z:
-            return json.loads(z.read("data"))
+            names = z.namelist()
+            layout = json.loads(z.read(LAYOUT_ENTRY)) if LAYOUT_ENTRY in names else None
+            return json.loads(z.read("data")), layout
     except (OSError, zipfile.BadZipFile, KeyError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not a stable-baselines3 model file ({exc})") from exc
-
-
-def read_layout(path: Path) -> dict[str, Any] | None:
-    """The `crowdnav.json` entry (signature and metadata) of an agent saved here, else None."""
-    with zipfile.ZipFile(path) as z:
-        if LAYOUT_ENTRY not in z.namelist():
-            return None
-        return json.loads(z.read(LAYOUT_ENTRY))
 
 
 def _class(name: str) -> Any:
@@ -104,10 +99,9 @@ def custom_objects(data: dict[str, Any], path: Path) -> dict[str, Any]:
     return out
 
 
-def saved_signature(data: dict[str, Any], path: Path) -> dict[str, Any] | None:
+def saved_signature(data: dict[str, Any], layout: dict[str, Any] | None) -> dict[str, Any] | None:
     """The observation signature of an SB3 file: its `crowdnav.json`, else keys/shapes parsed from the readable
     copy of its observation space (None when neither is there)."""
-    layout = read_layout(path)
     if layout is not None:
         return layout["signature"]
     spaces_text = data.get("observation_space", {}).get("spaces")
@@ -117,22 +111,22 @@ def saved_signature(data: dict[str, Any], path: Path) -> dict[str, Any] | None:
     return {"keys": keys} if keys else None
 
 
-def check_layout(data: dict[str, Any], path: Path, config: CrowdNavConfig) -> None:
-    """ValueError naming every difference between the agent's observation and this env's."""
-    saved = saved_signature(data, path)
-    if saved is None:
-        return
-    diff = mismatches(saved, signature(config))
+def check_layout(path: Path, config: CrowdNavConfig) -> dict[str, Any]:
+    """The "data" entry of the agent in `path`; ValueError naming every difference between the agent's
+    observation and this env's."""
+    data, layout = read_agent(path)
+    saved = saved_signature(data, layout)
+    diff = [] if saved is None else mismatches(saved, signature(config))
     if diff:
         raise ValueError(f"{path}: the agent was trained on another observation layout: {'; '.join(diff)}")
+    return data
 
 
 def load_agent(path: Path, algo: str, env: Any) -> Any:
     """The SB3 model in `path` for this env (its spaces), loaded without unpickling; ValueError otherwise."""
     if not path.is_file():
         raise ValueError(f"no such file {path}")
-    data = read_data(path)
-    check_layout(data, path, env.config)
+    data = check_layout(path, env.config)
     custom = custom_objects(data, path)
     import stable_baselines3
 
@@ -147,7 +141,7 @@ def load_agent(path: Path, algo: str, env: Any) -> Any:
 
 def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
     """Weights (and optimiser state) of `path` into `model` (weights_only); ValueError on a layout mismatch."""
-    check_layout(read_data(path), path, config)
+    check_layout(path, config)
     try:
         model.set_parameters(str(path), exact_match=True, device="cpu")
     except LOAD_ERRORS as exc:
