@@ -2,8 +2,10 @@
 
 Three kinds (`envs.records.COLLISION_KINDS`), decided from the step on which contact is first detected:
 
-    spawn       the pedestrian was not in the scene at the step's start: its (replayed) track began within
-                contact distance of the robot, which no planner could avoid;
+    spawn       the pedestrian was not in the scene at the step's start (its track began within contact
+                distance of the robot), or its replayed track began less than `SPAWN_WINDOW_S` before the
+                contact: before one 0.4 s prediction step nobody has observed its velocity, and in that time
+                the robot can move sideways by about 0.1 m, so no planner could avoid it;
     pedestrian  the pedestrian walked into a stopped or retreating robot: the robot's speed was under
                 `STOPPED_MPS` (whatever the pedestrian did: a stopped robot moved into nobody), or the
                 robot's velocity did not close the gap (component towards the pedestrian <= 0) while the
@@ -19,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 STOPPED_MPS = 0.1  # a robot slower than this counts as stopped, m/s
+SPAWN_WINDOW_S = 0.4  # a replayed track younger than this at contact is a spawn (one prediction step), s
 
 
 def collision_kind(robot_pos: np.ndarray, robot_vel: np.ndarray, ped_pos: np.ndarray, ped_vel: np.ndarray,

@@ -120,6 +120,8 @@ class CrowdNavConfig:
         intrudes when its body comes closer than this to the region, m.
     group_span_m: a ground-truth group wider than this (max pairwise distance) is not treated as a region, m.
     start_clearance_m: surface clearance required around the robot's start when choosing a route, m.
+    start_lookahead_s: the start must keep that clearance over this time with every pedestrian's current
+        velocity held, so that nobody is already walking into the standing robot (0: now only), s.
     rewards, observation: see their classes.
     replay: an `envs.replay.ReplayConfig` for scenario "replay".
     """
@@ -138,6 +140,7 @@ class CrowdNavConfig:
     group_space_m: float = 0.2
     group_span_m: float = 3.0
     start_clearance_m: float = 0.5
+    start_lookahead_s: float = 2.0
     rewards: RewardWeights = field(default_factory=RewardWeights)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     replay: Any = None
@@ -157,8 +160,9 @@ class CrowdNavConfig:
         _positive(self, ("dt_s", "time_limit_s", "goal_tolerance_m", "discomfort_distance_m", "group_span_m"))
         if not 0 <= self.group_space_m < math.inf:
             raise ValueError(f"group_space_m must be finite and >= 0, got {self.group_space_m}")
-        if not 0 <= self.warmup_s < math.inf or self.start_clearance_m < 0:
-            raise ValueError("warmup_s and start_clearance_m must be finite and >= 0")
+        for name in ("warmup_s", "start_clearance_m", "start_lookahead_s"):
+            if not 0 <= getattr(self, name) < math.inf:
+                raise ValueError(f"{name} must be finite and >= 0, got {getattr(self, name)}")
         step = DEFAULT_TIMING.step_s
         if abs(self.ticks_per_prediction_step * self.dt_s - step) > 1e-9:
             raise ValueError(f"dt_s must divide the {step} s prediction step, got {self.dt_s}")

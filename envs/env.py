@@ -23,7 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim import CrowdState
-from envs.attribution import collision_kind
+from envs.attribution import SPAWN_WINDOW_S, collision_kind
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
@@ -294,13 +294,21 @@ class CrowdNavEnv(gym.Env):
         return math.sqrt(d.dot(d))  # = np.linalg.norm(d) (sqrt of the same dot product), without its overhead
 
     def _choose_route(self) -> tuple[np.ndarray, np.ndarray]:
-        """A route whose start is clear of every pedestrian by start_clearance_m (the last draw otherwise)."""
-        p = self.pedestrians()
-        need = self.config.robot.radius_m + self.config.start_clearance_m
+        """A route whose start keeps start_clearance_m (surface) from every pedestrian now and, with their
+        current velocities held, over start_lookahead_s; after 50 draws, the draw with the most clearance."""
+        p, cfg = self.pedestrians(), self.config
+        need = cfg.robot.radius_m + cfg.start_clearance_m
+        times = np.linspace(0.0, cfg.start_lookahead_s, 1 + math.ceil(cfg.start_lookahead_s / cfg.dt_s))
+        future = p.pos[None] + times[:, None, None] * p.vel[None]  # (T, n, 2)
+        best, best_gap = None, -np.inf
         for _ in range(50):
             start, goal = self.crowd.robot_route(self.np_random)
-            if len(p.pos) == 0 or np.min(np.linalg.norm(p.pos - start, axis=1) - p.radius) >= need:
+            gap = float((np.linalg.norm(future - start, axis=-1) - p.radius).min()) if len(p.pos) else np.inf
+            if gap > best_gap:
+                best, best_gap = (start, goal), gap
+            if gap >= need:
                 break
+        start, goal = best
         return np.asarray(start, float), np.asarray(goal, float)
 
     def _update_prediction(self) -> None:
@@ -353,10 +361,13 @@ class CrowdNavEnv(gym.Env):
 
     def _collision_kind(self) -> str:
         """The kind of this step's pedestrian contact (`envs.attribution`): the pedestrian nearest along the step
-        (`_facts`), new when its slot held nobody or somebody else at the step's start."""
+        (`_facts`), new when its slot held nobody or somebody else at the step's start, or (replays) when its
+        track began less than SPAWN_WINDOW_S ago."""
         before_pos, before = self._step_start
         s, here, row = self._state, self.robot_state[:2], self._nearest_row
         new = not (before.active[row] and before.ped_id[row] == s.ped_id[row])
+        track_age_s = getattr(self.crowd, "track_age_s", None)
+        new = new or (track_age_s is not None and track_age_s(int(s.ped_id[row])) < SPAWN_WINDOW_S - 1e-9)
         robot_vel = (here - before_pos) / self.config.dt_s
         return collision_kind(here, robot_vel, s.pos[row], s.vel[row], new)
 

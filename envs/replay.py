@@ -210,6 +210,13 @@ class ReplayCrowd:
         """True once the recording has ended: no pedestrian is or will be in the scene."""
         return self._u_now() > self._last.max()
 
+    def track_age_s(self, ped_id: int) -> float:
+        """Recording time since pedestrian `ped_id`'s track began (its first annotated frame), s."""
+        i = int(np.searchsorted(self.ped_ids, ped_id))
+        if i >= len(self.ped_ids) or self.ped_ids[i] != ped_id:
+            raise KeyError(f"no pedestrian {ped_id} in {self.config.path}")
+        return (self._u_now() - float(self._first[i])) * self.config.frame_step_s
+
     def _u_now(self) -> float:
         """Current time in annotation steps from the first frame."""
         cfg = self.config

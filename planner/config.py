@@ -122,6 +122,10 @@ class MPCConfig:
     shield_max_risk: float = 0.1  # largest accepted fraction of hit samples, in [0, 1]
     shield_tau_s: float = 0.8  # time constant of the discount on later violations, s
     shield_cv: bool = True  # also avoid the last observed velocity held (needs prediction.history)
+    # commitment: when the shield replaced the previous control, candidates pay this much (m of discounted
+    # violation per unit of normalised control change) for leaving that command, so that an evasive manoeuvre
+    # is not swapped for its mirror image every 0.1 s; 0 = no commitment
+    shield_hold_weight: float = 0.0
 
     def __post_init__(self) -> None:
         _check_name("solver", self.solver, SOLVERS)
@@ -133,7 +137,7 @@ class MPCConfig:
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m",
                                    "speed_cap_min_mps", "speed_cap_lookahead_s"))
         _check_positive(self, ("speed_cap_gain_per_s", "shield_dt_s", "shield_tau_s"))
-        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m"))
+        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m", "shield_hold_weight"))
         if not 0.0 <= self.shield_max_risk <= 1.0:
             raise ValueError(f"MPCConfig.shield_max_risk must be in [0, 1], got {self.shield_max_risk!r}")
         if not 0.0 < self.speed_cap_half_angle_deg <= 180.0:

@@ -72,10 +72,12 @@ class MPCPlanner:
         self.ocp: OCP = shared_ocp(self.config)
         self.stats = PlanStats()
         self._plan: _Plan | None = None
+        self._shielded: np.ndarray | None = None  # the command the shield applied last step, if it replaced one
 
     def reset(self) -> None:
-        """Forget the stored plan (warm start and fallback); keep the stats."""
+        """Forget the stored plan (warm start and fallback) and the shield's last command; keep the stats."""
         self._plan = None
+        self._shielded = None
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
              obstacles: np.ndarray | list | None = None) -> PlanResult:
@@ -102,9 +104,11 @@ class MPCPlanner:
         wall time is added to ``solve_time_s``. A shield error keeps the plan's control (never raises)."""
         start = time.perf_counter()
         try:
-            verdict = shield_control(state, result.controls, prediction, obstacles, self.config)
+            verdict = shield_control(state, result.controls, prediction, obstacles, self.config, self._shielded)
         except Exception:  # the plan's own control is still a valid (if unchecked) answer
+            self._shielded = None
             return result
+        self._shielded = verdict.control.copy() if verdict.replaced else None
         elapsed = time.perf_counter() - start
         return replace(result, control=verdict.control, solve_time_s=result.solve_time_s + elapsed,
                        shield_risk=verdict.risk, shielded=verdict.replaced)

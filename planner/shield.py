@@ -13,7 +13,9 @@ samples it did not keep, a pedestrian can still reach the robot. The shield clos
    Its risk is the fraction of samples it hits.
 4. When the MPC's control has risk <= ``shield_max_risk``, it is kept. Otherwise the shield takes the candidate
    with the least time-discounted violation ``mean_k sum_t exp(-t / shield_tau_s) * relu(margin - clearance)``
-   (m). Ties go to the candidate nearest the MPC's control.
+   (m). Ties go to the candidate nearest the MPC's control. With ``shield_hold_weight`` > 0 and a command the
+   shield applied at the previous step (``previous``), every candidate also pays that weight times its
+   normalised distance from it: an evasive manoeuvre is kept unless another is clearly safer.
 
 With ``shield_cv`` (default) the pedestrians' last observed velocity, held over the look-ahead, is one more
 future that counts as certain (risk 1 when hit): at this range constant velocity is hard to beat, and a learned
@@ -133,10 +135,11 @@ def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, rob
 
 
 def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
-                   walls: np.ndarray | None, cfg: MPCConfig) -> ShieldVerdict:
+                   walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None) -> ShieldVerdict:
     """Check the plan's controls (H, 2) (each held ``cfg.dt_s``; the first is the one to apply) from ``state``
     (state_dim,) against every predicted sample and wall; replace its first control by a constant command
-    when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring)."""
+    when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring). ``previous`` (2,): the command
+    the shield applied at the previous step, if it replaced the plan's control there."""
     n_steps = max(1, int(round(cfg.shield_horizon_s / cfg.shield_dt_s)))
     planned = np.asarray(planned, float)
     cands = candidate_controls(cfg.robot, planned[0])
@@ -157,6 +160,8 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     violation = (np.maximum(short, 0.0) * weights).sum(-1).mean(-1)
     scale = np.array([cfg.robot.max_speed_mps, cfg.robot.max_yaw_rate_radps if cfg.robot.model == "unicycle"
                       else cfg.robot.max_speed_mps])
-    deviation = (((cands - cands[0]) / scale) ** 2).sum(-1)
-    best = int(np.argmin(violation + DEVIATION_WEIGHT * deviation))
+    cost = violation + DEVIATION_WEIGHT * (((cands - cands[0]) / scale) ** 2).sum(-1)
+    if previous is not None and cfg.shield_hold_weight > 0:
+        cost = cost + cfg.shield_hold_weight * np.sqrt((((cands - previous) / scale) ** 2).sum(-1))
+    best = int(np.argmin(cost))
     return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))

@@ -33,6 +33,31 @@ SPAWN_SNAPSHOTS = 2  # a collider seen in at most this many 0.4 s snapshots coun
 REPORTED = ("biwi_eth", "biwi_hotel", "students001", "students003", "crowds_zara01", "crowds_zara02")
 
 
+def overlay_recording(path: str, copies: int, out_dir: Path = Path("/tmp/tune_overlay")) -> str:
+    """A denser, still disjoint tuning recording: `copies` circularly time-shifted copies of `path` superimposed.
+
+    Copy j is shifted by j * duration / copies (wrapping round the end; a track cut by the wrap becomes two
+    tracks) and its pedestrian ids are offset by j * 100000. The copies do not avoid each other, like any
+    replay does not avoid the robot. Returns the path of the written file (`<stem>_x<copies>.txt`)."""
+    rows = np.loadtxt(path, ndmin=2)
+    frames = np.unique(rows[:, 0])
+    step = float(np.median(np.diff(frames)))
+    n_frames = len(frames)
+    index = np.searchsorted(frames, rows[:, 0])
+    parts = []
+    for j in range(copies):
+        shifted = (index + j * n_frames // copies) % n_frames
+        wrapped = shifted < index  # rows that wrapped round the end get new ids (the track is cut there)
+        ids = rows[:, 1] + j * 100000 + wrapped * 50000
+        parts.append(np.column_stack([frames[0] + shifted * step, ids, rows[:, 2], rows[:, 3]]))
+    merged = np.concatenate(parts)
+    merged = merged[np.lexsort((merged[:, 1], merged[:, 0]))]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out = out_dir / f"{Path(path).stem}_x{copies}.txt"
+    np.savetxt(out, merged, fmt=["%.1f", "%.1f", "%.6f", "%.6f"], delimiter="\t")
+    return str(out)
+
+
 def parse_variant(text: str) -> tuple[str, dict]:
     """``NAME[:k=v,k=v]`` -> (name, overrides); ``NAME:@crowd`` starts from planner.CROWD_MPC's fields."""
     name, _, rest = text.partition(":")
@@ -175,6 +200,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2, choices=(1, 2))
     ap.add_argument("--predictor", default=None, help="mpc-gpgraph's predictor (default: the env's); note that "
                     "every packaged ETH/UCY checkpoint was trained on the tuning recordings")
+    ap.add_argument("--overlay", type=int, default=1, help="superimpose this many time-shifted copies of each "
+                    "recording (denser crowds, e.g. 10 makes uni_examples about as dense as the univ test scene)")
     ap.add_argument("--json", type=Path, default=None, help="also write every episode's record here")
     args = ap.parse_args(argv)
 
@@ -184,6 +211,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.seed0 < 1000:
         print("tune on seeds 1000+", file=sys.stderr)
         return 2
+    if args.overlay < 1:
+        print("--overlay must be >= 1", file=sys.stderr)
+        return 2
+    if args.overlay > 1:
+        args.recordings = [overlay_recording(rec, args.overlay) for rec in args.recordings]
     variants = dict(parse_variant(v) for v in (args.variant or ["base"]))
     tasks = [(rec, pol, name, ov, args.base, seed)
              for rec in args.recordings for pol in args.policies for name, ov in variants.items()

@@ -68,3 +68,28 @@ def test_env_track_that_starts_on_the_robot_is_a_spawn(tmp_path):
     env, m = _robot_waits_at_origin(tmp_path, [(t, 0.3, 0.0) for t in range(20, 40)])
     assert m["collision"] and m["collision_kind"] == "spawn"
     assert m["collision_time_s"] == pytest.approx(20 * 0.4 - env.config.warmup_s, abs=0.11)
+
+
+def test_env_track_that_begins_just_before_contact_is_a_spawn(tmp_path):
+    # pedestrian 1 appears at step 20, 1.0 m from the robot's centre, and runs at it at 2 m/s (0.8 m per 0.4 s
+    # step): contact within one prediction step of its first annotation, before its velocity could be seen
+    _, m = _robot_waits_at_origin(tmp_path, [(t, 1.0 - 0.8 * (t - 20), 0.0) for t in range(20, 24)])
+    assert m["collision"] and m["collision_kind"] == "spawn"
+
+
+def test_env_track_seen_for_a_while_is_not_a_spawn(tmp_path):
+    # the same run-in, but the track began 3 steps (1.2 s) earlier, standing still 1.0 m away
+    track = [(t, 1.0, 0.0) for t in range(17, 21)] + [(t, 1.0 - 0.8 * (t - 20), 0.0) for t in range(21, 24)]
+    _, m = _robot_waits_at_origin(tmp_path, track)
+    assert m["collision"] and m["collision_kind"] == "pedestrian"
+
+
+def test_replay_track_age(tmp_path):
+    env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: [(t, 5.0, 0.0) for t in range(10, 40)],
+                                                                  2: [(t, 30.0, 30.0) for t in range(40)]}))
+    env.reset(seed=0)
+    crowd = env.crowd
+    assert crowd.track_age_s(2) == pytest.approx(crowd.recording_time_s)
+    assert crowd.track_age_s(1) == pytest.approx(crowd.recording_time_s - 10 * 0.4)
+    with pytest.raises(KeyError):
+        crowd.track_age_s(99)

@@ -287,3 +287,22 @@ def test_history_counts_the_snapshots_a_pedestrian_appears_in():
         ids = [1, 2] if k >= 3 else ([1, 3] if k == 0 else [1])
         hist.record(np.array(ids), np.zeros((len(ids), 2)))
     assert (hist.times_seen(1), hist.times_seen(2), hist.times_seen(3), hist.times_seen(9)) == (3, 2, 0, 0)
+
+
+@pytest.mark.parametrize("lookahead_s, expected_start", [(2.0, (0.0, -5.0)), (0.0, (0.0, 0.0))])
+def test_route_start_is_not_in_the_path_of_a_walker(tmp_path, lookahead_s, expected_start):
+    # pedestrian 1 walks along +x at 1 m/s (0.4 m per 0.4 s frame) and is 2 m short of the first candidate
+    # start (0, 0) after the warm-up (1.45 m surface gap): clear now, reached within 2 s; the second candidate
+    # (0, -5) stays clear
+    path = tmp_path / "walker.txt"
+    rows = [f"{10 * t}\t1\t{-2.0 + 0.4 * (t - 8)}\t0.0" for t in range(60)]  # frame 8 = after the warm-up
+    rows += [f"{10 * t}\t2\t20.0\t20.0" for t in range(60)]
+    path.write_text("\n".join(rows) + "\n")
+    env = CrowdNavEnv(CrowdNavConfig(scenario="replay", start_lookahead_s=lookahead_s,
+                                     replay=ReplayConfig(path=path, start_mode="fixed")))
+    routes = iter([(np.array([0.0, 0.0]), np.array([10.0, 0.0])), (np.array([0.0, -5.0]), np.array([10.0, -5.0]))])
+    env.crowd.robot_route = lambda rng: next(routes)
+    env.reset(seed=0)
+    walker = env.pedestrians().pos[env.pedestrians().ped_id == 1][0]
+    assert walker == pytest.approx([-2.0, 0.0])
+    np.testing.assert_allclose(env.robot_state[:2], expected_start)

@@ -137,3 +137,24 @@ def test_the_reach_filter_never_changes_the_verdict(monkeypatch):
             full = shield_control(state, STRAIGHT, pred, None, SHIELD)
         assert np.allclose(filtered.control, full.control)
         assert (filtered.risk, filtered.chosen_risk, filtered.replaced) == (full.risk, full.chosen_risk, full.replaced)
+
+
+def test_commitment_keeps_the_side_of_an_evasive_manoeuvre():
+    """A pedestrian walks head-on at the robot: dodging left and right are mirror images. With commitment the
+    shield keeps the side it chose at the previous step; without it the previous command is ignored."""
+    state = np.array([0.0, 0.0, 0.0, 1.2, 0.0])
+    pred = _crossing([2.6, 0.0], [-1.3, 0.0])
+    yaw = SHIELD.robot.max_yaw_rate_radps
+    hold = replace(SHIELD, shield_hold_weight=0.1)
+    free = shield_control(state, STRAIGHT, pred, None, SHIELD)
+    assert free.replaced and free.control[1] != 0.0
+    for side in (-1.0, 1.0):
+        previous = np.array([1.2, side * yaw])
+        kept = shield_control(state, STRAIGHT, pred, None, hold, previous)
+        assert kept.replaced and np.sign(kept.control[1]) == side
+        assert np.allclose(shield_control(state, STRAIGHT, pred, None, SHIELD, previous).control, free.control)
+
+
+def test_invalid_hold_weight_raises():
+    with pytest.raises(ValueError):
+        MPCConfig(shield_hold_weight=-0.1)
