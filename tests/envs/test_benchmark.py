@@ -175,17 +175,17 @@ def test_cli_benchmark_runs_a_suite_and_resumes(tmp_path, capsys):
             "--out", str(tmp_path), "--workers", "1", "--no-progress"]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "Leaderboard: suite smoke v2" in out and "| corridor-low-visible |" in out
+    assert "Leaderboard: suite smoke v3" in out and "| corridor-low-visible |" in out
     assert "2 episodes run, 0 already recorded" in out
     assert len(read_records(tmp_path / RECORDS)) == 2
     assert main(args) == 0
     assert "0 episodes run, 2 already recorded" in capsys.readouterr().out
     assert main(["suites"]) == 0
-    assert "crowdnav-v1 v2: " in capsys.readouterr().out
+    assert "crowdnav-v1 v3: " in capsys.readouterr().out
 
 
 def test_real_cells_give_mpc_gpgraph_the_scenes_leave_one_out_predictor(tmp_path):
-    """In crowdnav-v1 (version 2) a real cell runs mpc-gpgraph with the ETH/UCY checkpoint that never saw its
+    """In crowdnav-v1 (version 2 on) a real cell runs mpc-gpgraph with the ETH/UCY checkpoint that never saw its
     scene, a synthetic cell with the default; an explicit predictor wins, and `{scene}` is filled per cell."""
     from envs.policies import make_policy
     from predictor.checkpoint import PACKAGE_CHECKPOINTS
