@@ -92,7 +92,8 @@ def _summary(board: dict[str, Any]) -> list[str]:
 def _paired(board: dict[str, Any]) -> list[str]:
     lines = ["### Paired comparisons (same episodes; exact McNemar, two-sided, alpha 0.05)", "",
              "| pool | A vs B | pairs | collisions A/B (A only, B only) | p | avoidable A/B | p | "
-             "successes A/B | p | path A-B (m) [95% CI] |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "successes A/B | p | group intrusions A/B | p | path A-B (m) [95% CI] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for pool, comps in board["paired"].items():
         for c in comps:
             def cnt(k: str, c: dict[str, Any] = c) -> str:
@@ -103,7 +104,7 @@ def _paired(board: dict[str, Any]) -> list[str]:
             ptxt = (f"{path['mean_diff']:+.2f} [{path['ci95'][0]:+.2f}, {path['ci95'][1]:+.2f}]"
                     f"{' *' if path['significant'] else ''}") if path else "–"
             lines.append(f"| {pool} | {c['policy_a']} vs {c['policy_b']} | {c['pairs']} | {cnt('collision')} | "
-                         f"{cnt('avoidable_collision')} | {cnt('success')} | {ptxt} |")
+                         f"{cnt('avoidable_collision')} | {cnt('success')} | {cnt('group_intrusion')} | {ptxt} |")
     lines.append("")
     lines.append("`*`: significant at alpha = 0.05 (no correction for the number of comparisons).")
     return [*lines, ""]

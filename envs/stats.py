@@ -111,6 +111,7 @@ PAIRED_EVENTS: dict[str, Callable[[EpisodeRecord], bool]] = {
     "success": lambda r: r.outcome == "success",
     "collision": lambda r: r.outcome == "collision",
     "avoidable_collision": lambda r: r.avoidable_collision,
+    "group_intrusion": lambda r: r.group_intrusion,
 }
 
 
@@ -118,9 +119,9 @@ def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], al
                       seed: int = 0) -> dict[str, Any]:
     """Policy a against policy b on the episodes both completed (matched by cell and seed).
 
-    For each binary event (success, collision, avoidable collision): counts, the discordant pairs (a only,
-    b only), the exact McNemar p-value and `significant` (p < alpha). For the path length of episodes both
-    succeeded: the mean paired difference a - b with a 95% paired-bootstrap interval (seeded by `seed`).
+    For each binary event (success, collision, avoidable collision, group intrusion): counts, the discordant
+    pairs (a only, b only), the exact McNemar p-value and `significant` (p < alpha). For the path length of
+    episodes both succeeded: the mean paired difference a - b with a 95% paired-bootstrap interval (seeded by `seed`).
     """
     bkeys = {(r.cell, r.seed): r for r in b if r.outcome != "error"}
     pairs = [(r, bkeys[(r.cell, r.seed)]) for r in a if r.outcome != "error" and (r.cell, r.seed) in bkeys]

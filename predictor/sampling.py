@@ -105,8 +105,8 @@ def draw_latents(
             raise ValueError(f"kind='kmeans' needs a pool of {k}-centroid sets")
         sets = pool[rng.integers(len(pool), size=(steps, n_units))]  # (steps, units, K, 2)
         z = np.transpose(sets, (2, 0, 1, 3))
-    z = z[:, :, unit]
-    return np.broadcast_to(z, (k, t, len(groups), 2)).copy()
+    z = np.take(z, unit, axis=2)  # a new array
+    return z if z.shape[1] == t else np.broadcast_to(z, (k, t, len(groups), 2)).copy()
 
 
 def cholesky_2x2(cov: np.ndarray) -> np.ndarray:
@@ -121,8 +121,9 @@ def cholesky_2x2(cov: np.ndarray) -> np.ndarray:
 
 def sample_positions(mu: np.ndarray, chol: np.ndarray, z: np.ndarray, last: np.ndarray) -> np.ndarray:
     """Absolute samples (K, T, N, 2) from step means ``mu`` (T, N, 2), factors (T, N, 2, 2), latents, last (N, 2)."""
-    z0, z1 = z[..., 0], z[..., 1]
-    steps = np.empty(z.shape)
-    steps[..., 0] = mu[None, ..., 0] + chol[None, ..., 0, 0] * z0 + chol[None, ..., 0, 1] * z1
-    steps[..., 1] = mu[None, ..., 1] + chol[None, ..., 1, 0] * z0 + chol[None, ..., 1, 1] * z1
-    return last[None, None] + np.cumsum(steps, axis=1)
+    steps = z[..., :1] * chol[..., 0]  # (K, T, N, 2): z_0 * L[:, 0]
+    steps += mu  # in this order: mu + L_00 z_0 + L_01 z_1, as written out per coordinate
+    steps += z[..., 1:] * chol[..., 1]
+    np.cumsum(steps, axis=1, out=steps)
+    steps += last
+    return steps

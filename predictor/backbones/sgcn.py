@@ -18,6 +18,7 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 from predictor.backbones.base import Backbone, Variant, displacement_features
+from predictor.backbones.cross_conv import CrossStack
 from predictor.grouping import pair_mask
 
 
@@ -66,13 +67,23 @@ class MultiHeadScores(nn.Module):
         """x (..., L, in_dims); key_mask (..., L) bool -> softmax scores (..., heads, L, L)."""
         emb = self.embedding(x)
         scores = self._split(self.query(emb)) @ self._split(self.key(emb)).transpose(-1, -2) / self.scale
-        if key_mask is not None:
+        if key_mask is not None and torch.is_grad_enabled():
             scores = scores.masked_fill(~key_mask[..., None, None, :], float("-inf"))
-        return torch.softmax(scores, dim=-1)
+        elif key_mask is not None:  # the same in place, faster: add 0 or -inf
+            bias = torch.zeros(key_mask.shape, dtype=scores.dtype, device=scores.device)
+            scores += bias.masked_fill_(~key_mask, float("-inf"))[..., None, None, :]
+        if torch.is_grad_enabled() or scores.shape[-1] >= 16:
+            return torch.softmax(scores, dim=-1)
+        # torch's CPU softmax is several times slower than this over rows shorter than one vector register
+        e = (scores - scores.amax(dim=-1, keepdim=True)).exp_()
+        return e.div_(e.sum(dim=-1, keepdim=True))
 
 
 def zero_softmax(x: Tensor, eps: float = 1e-5) -> Tensor:
     """Row normalisation of (exp(x) - 1)^2 over the last axis: exact zeros stay zero."""
+    if not torch.is_grad_enabled():  # the same operations in place
+        e = torch.exp(x).sub_(1.0).pow_(2)
+        return e.div_(e.sum(dim=-1, keepdim=True).add_(eps))
     e = torch.pow(torch.exp(x) - 1.0, 2)
     return e / (e.sum(dim=-1, keepdim=True) + eps)
 
@@ -122,6 +133,8 @@ class SGCN(Backbone):
         )
         self.tcn_acts = nn.ModuleList(nn.PReLU() for _ in range(n_tcn))
         self.output = nn.Linear(hid, 5)
+        self._spatial_stack = CrossStack(self.spatial_asym)  # the stacks' inference path
+        self._temporal_stack = CrossStack(self.temporal_asym)
 
     def features(self, rel: Tensor) -> Tensor:
         return displacement_features(rel, with_time=True)
@@ -130,6 +143,10 @@ class SGCN(Backbone):
         """Sparse interaction masks from fused spatial scores s (B, T, H, N, N) and temporal t (B, N, H, T, T)."""
         b, tt, h, n, _ = s.shape
         v = valid[:, None, None].to(s.dtype)  # (B, 1, 1, N, N)
+        if not torch.is_grad_enabled():  # both stacks as small matmuls (equal up to float rounding)
+            gate = self.mask_threshold
+            return (self._spatial_stack(s.movedim(2, 0), v[:, :, 0], gate),  # masks s on entry
+                    self._temporal_stack(t.movedim(2, 0), None, gate))
         x = (s * v).reshape(b * tt, h, n, n)
         vf = v.expand(b, tt, 1, n, n).reshape(b * tt, 1, n, n)
         for layer in self.spatial_asym:
@@ -153,9 +170,10 @@ class SGCN(Backbone):
         f = att_s.transpose(1, 2).reshape(b * self.heads, t, n, n)
         fused = (self.fusion_act(self.fusion_conv(f)) + f).reshape(b, self.heads, t, n, n).transpose(1, 2)
         mask_s, mask_t = self._masks(fused, att_t, valid)
-        mask_s = mask_s + torch.eye(n, dtype=x.dtype, device=x.device)
-        mask_t = mask_t + torch.eye(t, dtype=x.dtype, device=x.device)
-        return att_s * mask_s, valid, zero_softmax(att_t * mask_t)
+        eye_s, eye_t = (torch.eye(k, dtype=x.dtype, device=x.device) for k in (n, t))
+        if not torch.is_grad_enabled():  # the same products, in place
+            return mask_s.add_(eye_s).mul_(att_s), valid, zero_softmax(mask_t.add_(eye_t).mul_(att_t))
+        return att_s * (mask_s + eye_s), valid, zero_softmax(att_t * (mask_t + eye_t))
 
     @staticmethod
     def _spatial(scores: Tensor, valid: Tensor, edge_mask: Tensor | None) -> Tensor:
@@ -177,11 +195,12 @@ class SGCN(Backbone):
         ts = self.gcn_ts[0](pos.transpose(1, 2)[:, :, None], adj_t).permute(0, 3, 2, 1, 4)  # (B, T, H, N, d)
         ts = self.gcn_ts[1](ts, adj_s).permute(0, 3, 2, 1, 4)  # (B, N, H, T, d)
         h, d = st.shape[2], st.shape[-1]
-        rep = self.head_fusion(st.reshape(b * n, h, t, d)) + ts.reshape(b * n, h, t, d)
-        feat = rep.transpose(1, 2)  # (B*N, T, H, d)
+        fuse = self.head_fusion.weight[:, :, 0, 0].expand(b * n, h, h)  # the 1x1 convolution as a matmul
+        rep = torch.baddbmm(ts.reshape(b * n, h, t * d), fuse, st.reshape(b * n, h, t * d))
+        feat = rep.view(b * n, h, t, d).transpose(1, 2)  # (B*N, T, H, d)
         feat = self.tcn_acts[0](self.tcn_convs[0](feat))
         for conv, act in zip(self.tcn_convs[1:], self.tcn_acts[1:], strict=True):
-            feat = act(conv(feat)) + feat
+            feat = act(conv(feat)).add_(feat)
         out = self.output(feat).mean(dim=-2)  # (B*N, 12, 5)
         return out.reshape(b, n, -1, 5).transpose(1, 2)
 

@@ -107,6 +107,15 @@ def test_paired_comparison_uses_the_same_episodes_and_calls_significance_by_the_
     assert not d["collision"]["significant"]
 
 
+def test_paired_group_intrusions_count_episodes_that_entered_a_group():
+    # a enters a group in 9 of 30 successful episodes, b in 1 of them (and in one a did not)
+    a = [_rec(s, "success", ttg=5.0, intr=s < 9, policy="a") for s in range(30)]
+    b = [_rec(s, "success", ttg=5.0, intr=s in (0, 20), policy="b") for s in range(30)]
+    c = paired_comparison(a, b)["group_intrusion"]
+    assert (c["a"], c["b"], c["a_only"], c["b_only"]) == (9, 2, 8, 1)
+    assert c["p_value"] == pytest.approx(mcnemar_exact(8, 1)) and c["significant"] == (c["p_value"] < 0.05)
+
+
 def test_paired_bootstrap_covers_the_mean():
     rng = np.random.default_rng(0)
     diff = rng.normal(0.3, 1.0, 200)
