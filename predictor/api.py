@@ -15,7 +15,7 @@ from predictor.batch import relative
 from predictor.checkpoint import load_model
 from predictor.device import model_device
 from predictor.gaussian import mean_cov
-from predictor.model import GPGraph
+from predictor.model import GPGraph, check_group_mode, check_group_threshold_scale
 from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
 
 OBS_LEN, PRED_LEN = 8, 12
@@ -150,16 +150,26 @@ class ConstantVelocityPredictor:
 
 
 def load_predictor(
-    name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None
+    name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None,
+    group_threshold_scale: float | None = None, group_mode: str | None = None,
 ) -> GPGraphPredictor | ConstantVelocityPredictor:
     """A predictor by packaged name ('gpgraph-stgcnn-hotel', 'constant-velocity') or checkpoint path.
 
     ``backbone``/``grouping`` apply to checkpoint files (a published reference file defaults to
-    backbone 'sgcn' with 'official' grouping).
+    backbone 'sgcn' with 'official' grouping). ``group_threshold_scale`` (finite, > 0) multiplies the learned
+    group threshold at inference (below 1: fewer, smaller groups; see ``GPGraph``); None keeps the
+    checkpoint's calibrated value, or 1.0 when it has none. ``group_mode`` ('exact', 'official' or 'average':
+    average-linkage clustering of the learned distances, see ``GPGraph``) overrides the hard grouping at
+    inference; None keeps the checkpoint's, or the grouping it was trained with. Both are checked, then
+    ignored, for constant velocity.
     """
+    if group_threshold_scale is not None:
+        check_group_threshold_scale(group_threshold_scale)
+    check_group_mode(group_mode)
     if str(name_or_path) in CONSTANT_VELOCITY_NAMES:
         return ConstantVelocityPredictor()
-    model, _ = load_model(name_or_path, backbone=backbone, grouping=grouping)
+    model, _ = load_model(name_or_path, backbone=backbone, grouping=grouping,
+                          group_threshold_scale=group_threshold_scale, group_mode=group_mode)
     return GPGraphPredictor(model)
 
 

@@ -2,6 +2,10 @@
 
 Our format is a plain dict, loadable with ``torch.load(..., weights_only=True)``:
 ``{"format": FORMAT, "config": GPGraphConfig.to_dict(), "state_dict": {...}, "meta": {...}}``.
+The meta is free-form (training epoch, recipe, data, ...) except for two optional keys read back at loading:
+``"group_threshold_scale"``, a calibrated ``GPGraph.group_threshold_scale`` (absent: 1.0, the learned threshold
+as is), and ``"group_mode"``, a ``GPGraph.group_mode`` (absent: None, the config's grouping as trained); the
+savers below write them only when the model's value is not the default.
 Nothing is ever unpickled without ``weights_only=True``. Files always hold CPU tensors, whatever device the
 model trained on (``save_atomic`` moves them), and reading maps everything to the CPU first; callers move the
 model to their device afterwards.
@@ -21,9 +25,11 @@ from safetensors import SafetensorError, safe_open
 from safetensors.torch import save_file
 
 from predictor.backbones import BACKBONES
-from predictor.model import GPGraph, GPGraphConfig
+from predictor.model import GPGraph, GPGraphConfig, check_group_mode, check_group_threshold_scale
 
 FORMAT = "predictor.gpgraph/1"
+META_GROUP_THRESHOLD_SCALE = "group_threshold_scale"  # optional meta key, see the module docstring
+META_GROUP_MODE = "group_mode"  # optional meta key, see the module docstring
 PACKAGE_CHECKPOINTS = Path(__file__).parent / "checkpoints"
 
 
@@ -113,13 +119,20 @@ def resolve(name_or_path: str | Path) -> Path:
 
 
 def load_model(
-    name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None
+    name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None,
+    group_threshold_scale: float | None = None, group_mode: str | None = None,
 ) -> tuple[GPGraph, dict]:
     """Build a model from a checkpoint (ours or the authors'); returns (model in eval mode, meta).
 
     ``backbone`` and ``grouping`` override the config; for a reference checkpoint, whose file holds no
     config, the defaults are the published GP-Graph-SGCN with ``grouping`` ('official' to match its code).
+    The model's ``group_threshold_scale`` is ``group_threshold_scale`` when given (finite, > 0), else the
+    meta's ``"group_threshold_scale"`` when the file has one, else 1.0; likewise its ``group_mode`` is
+    ``group_mode`` when given, else the meta's ``"group_mode"``, else None (the config's grouping).
     """
+    if group_threshold_scale is not None:
+        group_threshold_scale = check_group_threshold_scale(group_threshold_scale)
+    check_group_mode(group_mode)
     path = resolve(name_or_path)
     obj = read_file(path)
     if is_reference_state(obj):
@@ -136,7 +149,33 @@ def load_model(
         raise CheckpointError(f"{path} is neither a predictor checkpoint nor a reference GP-Graph state_dict")
     model = GPGraph(cfg)
     load_state(model, state, str(path))
+    if group_threshold_scale is None:
+        try:
+            group_threshold_scale = check_group_threshold_scale(meta.get(META_GROUP_THRESHOLD_SCALE, 1.0))
+        except ValueError as exc:
+            raise CheckpointError(f"checkpoint {path}: meta {exc}") from None
+    if group_mode is None:
+        try:
+            group_mode = check_group_mode(meta.get(META_GROUP_MODE))
+        except ValueError as exc:
+            raise CheckpointError(f"checkpoint {path}: meta {exc}") from None
+    model.group_threshold_scale = group_threshold_scale
+    model.group_mode = group_mode
     return model.eval(), meta
+
+
+def meta_with_scale(model: GPGraph, meta: dict | None) -> dict:
+    """``meta`` plus the model's ``group_threshold_scale`` when it is not 1.0 and its ``group_mode`` when not
+    None (else without those keys), so a file records the calibration its model was saved with and an
+    uncalibrated one stays as before."""
+    out = dict(meta or {})
+    out.pop(META_GROUP_THRESHOLD_SCALE, None)
+    out.pop(META_GROUP_MODE, None)
+    if model.group_threshold_scale != 1.0:
+        out[META_GROUP_THRESHOLD_SCALE] = model.group_threshold_scale
+    if model.group_mode is not None:
+        out[META_GROUP_MODE] = model.group_mode
+    return out
 
 
 def to_cpu(obj: Any) -> Any:
@@ -169,17 +208,19 @@ def save_atomic(obj: dict, path: str | Path) -> None:
 
 
 def save_model(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
-    """Save a model with its config inside (atomic)."""
+    """Save a model with its config inside (atomic); ``meta`` gains the model's calibration (``meta_with_scale``)."""
     save_atomic(
         {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
-         "meta": meta or {}},
+         "meta": meta_with_scale(model, meta)},
         path,
     )
 
 
 def export_packaged(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
-    """Write a model as ``.safetensors`` with its config and ``meta`` as JSON metadata (for shipping)."""
+    """Write a model as ``.safetensors`` with its config and ``meta`` (plus the model's calibration,
+    ``meta_with_scale``) as JSON metadata (for shipping)."""
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-    metadata = {"format": FORMAT, "config": json.dumps(model.config.to_dict()), "meta": json.dumps(meta or {})}
+    metadata = {"format": FORMAT, "config": json.dumps(model.config.to_dict()),
+                "meta": json.dumps(meta_with_scale(model, meta))}
     save_file(state, str(path), metadata=metadata)
     os.chmod(path, 0o644)

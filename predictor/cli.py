@@ -8,6 +8,9 @@ Examples::
         --protocol iid --seed 0 --json hotel.json
     gpgraph evaluate --checkpoint ../shared/reference/gpgraph_sgcn/hotel/val_best.pth --backbone sgcn \
         --grouping official --data ../shared/datasets/eth_ucy/hotel --protocol paper
+    gpgraph evaluate --checkpoint gpgraph-stgcnn-synthetic --data out/synthetic_predictor/data --split val \
+        --group-threshold-scale 0.8
+    gpgraph evaluate --checkpoint gpgraph-stgcnn-synthetic --data out/synthetic_predictor/data --group-mode average
     gpgraph predict --checkpoint gpgraph-stgcnn-hotel --history out/hist.npy --out out/pred.npz
 """
 
@@ -27,12 +30,14 @@ from predictor.checkpoint import CheckpointError, load_model
 from predictor.data import DataFormatError
 from predictor.device import DEVICES, resolve_device
 from predictor.evaluate import EvalConfig, evaluate
-from predictor.model import GPGraphConfig
+from predictor.grouping import THRESHOLD_MODES
+from predictor.model import GPGraph, GPGraphConfig, check_group_threshold_scale
 from predictor.sampling import PROTOCOLS
-from predictor.train import TrainConfig, train
+from predictor.train import TrainConfig, initial_weights, train
 from predictor.windows import load_windows
 
 METRIC_KEYS = ("ade", "fde", "col", "tcc", "pw_precision", "pw_recall", "gmitre_precision", "gmitre_recall")
+SPLITS = ("train", "val", "test")
 
 
 def split_folder(data: Path, split: str) -> Path:
@@ -57,7 +62,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight)
     cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
                       bucket=args.bucket, max_pairs=args.max_pairs,
-                      seed=args.seed, eval_every=args.eval_every, model=model_cfg)
+                      seed=args.seed, eval_every=args.eval_every, init=args.init, model=model_cfg)
+    if args.init:  # a missing, corrupt or mismatched checkpoint is reported before any data is read
+        initial_weights(GPGraph(model_cfg), args.init)
     train_w = _windows(args.data, "train")[: args.max_windows or None]
     val_w = _windows(args.data, "val")[: args.max_windows or None]
     labelled = sum(w.group_id is not None for w in train_w)
@@ -85,13 +92,17 @@ def format_table(result: dict) -> str:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.json:
         _check_output_file(args.json, ".json")
-    model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping)
-    windows = _windows(args.data, "test")
+    model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping,
+                          group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode)
+    windows = _windows(args.data, args.split)
     cfg = EvalConfig(protocol=args.protocol, seed=args.seed, trials=args.trials, n_samples=args.samples,
                      pool_size=args.pool_size)
     result = evaluate(model.to(args.device), windows, cfg, progress=not args.quiet)
     result["checkpoint"] = str(args.checkpoint)
     result["grouping"] = model.config.grouping
+    result["group_threshold_scale"] = model.group_threshold_scale
+    result["group_mode"] = model.effective_group_mode
+    result["split"] = args.split
     print(format_table(result))
     if args.json:
         clean = {k: (None if isinstance(v, float) and v != v else v) for k, v in result.items()}  # NaN -> null
@@ -107,7 +118,8 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
     out = _check_output_file(args.out, ".npz")
     history = _load_history(args.history)
-    model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping)
+    model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping,
+                          group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode)
     model = model.to(args.device)
     if args.sample_level:
         model.config = replace(model.config, sample_level=args.sample_level)
@@ -167,6 +179,24 @@ def _load_history(path: Path) -> np.ndarray:
     return history
 
 
+def group_threshold_scale_arg(text: str) -> float:
+    """argparse type of --group-threshold-scale: a finite number > 0 (else a one-line usage error, exit 2)."""
+    try:
+        return check_group_threshold_scale(float(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}") from None
+
+
+def _group_calibration(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--group-threshold-scale", type=group_threshold_scale_arg, default=None, metavar="X",
+                   help="multiply the learned group threshold pi by X at inference (below 1: fewer, smaller "
+                        "groups); None: the checkpoint's calibrated value, else 1.0 (the learned pi as is)")
+    p.add_argument("--group-mode", choices=THRESHOLD_MODES, default=None, metavar="NAME",
+                   help=f"hard grouping at inference, one of {', '.join(THRESHOLD_MODES)} ('average': average-"
+                        "linkage clustering of the learned distances cut at the threshold); None: the "
+                        "checkpoint's, else the grouping it was trained with")
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     p.add_argument("--device", choices=DEVICES, default="cpu",
@@ -217,15 +247,21 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--max-windows", type=int, default=0, help="use only the first N windows (smoke tests)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    t.add_argument("--init", default="", metavar="CHECKPOINT",
+                   help="start from this checkpoint's weights (packaged name or path; same architecture), e.g. "
+                        "fine-tune gpgraph-stgcnn-synthetic on real data; default: random weights")
     t.add_argument("--eval-every", type=int, default=TrainConfig.eval_every,
                    help="validation ADE/FDE (iid, best of 20, 1 trial, seed 0) at epochs 0, N, 2N, ... and the "
                         "last, into log.csv columns val_ade,val_fde; 0: off (the checkpoint is kept by loss)")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
-    e = sub.add_parser("evaluate", help="ADE/FDE/COL/TCC (+ PW/G-MITRE) on DATA/test")
+    e = sub.add_parser("evaluate", help="ADE/FDE/COL/TCC (+ PW/G-MITRE) on DATA/test (or --split)")
     _common(e)
     e.add_argument("--checkpoint", required=True, help="checkpoint path or packaged name")
     e.add_argument("--data", type=Path, required=True)
+    e.add_argument("--split", choices=SPLITS, default="test",
+                   help="which DATA/SPLIT folder to score (DATA itself when it has no such folder)")
+    _group_calibration(e)
     e.add_argument("--protocol", choices=PROTOCOLS, default="iid")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--trials", type=int, default=EvalConfig.trials)
@@ -243,6 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--samples", type=int, default=20)
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
+    _group_calibration(r)
     r.set_defaults(func=cmd_predict)
     ls = sub.add_parser("list", help="print the packaged predictor names (usable wherever a checkpoint is asked for)")
     ls.set_defaults(func=cmd_list)

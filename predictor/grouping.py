@@ -3,6 +3,9 @@
 Batched layout: B windows padded to N pedestrians; ``node_mask`` (B, N) marks real pedestrians, which are
 always the first ones of each window. Group labels (B, N) are 0..G_b-1 for the real pedestrians of window
 b and G_b, G_b+1, ... for its padding, so every padded node is a group of its own.
+
+Hard assignment from the learned pair distances D and a threshold t ('exact', 'official': pairs with D <= t;
+'average': average-linkage clustering of D cut at t, inference only, see ``GPGraph.group_mode``).
 """
 
 from __future__ import annotations
@@ -11,7 +14,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-GROUPING_MODES = ("exact", "official", "ratio")
+GROUPING_MODES = ("exact", "official", "ratio")  # GPGraphConfig.grouping (training and inference)
+THRESHOLD_MODES = ("exact", "official", "average")  # threshold_groups; GPGraph.group_mode (inference override)
 
 
 def pair_mask(node_mask: Tensor) -> Tensor:
@@ -70,8 +74,52 @@ def _pad_labels(labels: list[np.ndarray], n: int) -> Tensor:
     return torch.from_numpy(out)
 
 
+def average_linkage(dist: Tensor, threshold: Tensor | float, node_mask: Tensor) -> Tensor:
+    """Average-linkage (UPGMA) clusters of ``dist`` (B, N, N) cut at ``threshold``; labels (B, N) by first member.
+
+    Starting from singletons, the two clusters with the smallest mean pairwise distance (over all their
+    cross pairs, of the symmetrised D) merge while that mean is <= ``threshold``; average linkage is monotone,
+    so this is scipy's ``fcluster(linkage(D, 'average'), t=threshold, criterion='distance')``. Unlike
+    connected components a cluster never grows through one close neighbour of a far member. Padded
+    pedestrians are never merged. All windows merge in lock-step (numpy, float64, Lance-Williams updates;
+    ties go to the lowest (i, j)): at most N - 1 vectorised steps of O(B N^2).
+    """
+    d = dist.detach().double().cpu().numpy()
+    d = (d + d.transpose(0, 2, 1)) / 2
+    b, n, _ = d.shape
+    real = node_mask.detach().cpu().numpy()
+    d = np.where(real[:, :, None] & real[:, None, :] & ~np.eye(n, dtype=bool), d, np.inf)
+    d[np.isnan(d)] = np.inf
+    size = np.ones((b, n))
+    lab = np.broadcast_to(np.arange(n), (b, n)).copy()  # each node's cluster representative (its first member)
+    live = np.arange(b)
+    thr = float(threshold.detach()) if isinstance(threshold, Tensor) else float(threshold)
+    while len(live):
+        flat = d[live].reshape(len(live), -1).argmin(axis=1)
+        lo, hi = np.divmod(flat, n)  # lo < hi: the first minimum of a symmetric matrix lies above the diagonal
+        ok = d[live, lo, hi] <= thr
+        live, lo, hi = live[ok], lo[ok], hi[ok]
+        if not len(live):
+            break
+        s_lo, s_hi = size[live, lo][:, None], size[live, hi][:, None]
+        merged = (s_lo * d[live, lo] + s_hi * d[live, hi]) / (s_lo + s_hi)  # mean distance to every cluster
+        d[live, lo, :] = merged
+        d[live, :, lo] = merged
+        d[live, hi, :] = np.inf
+        d[live, :, hi] = np.inf
+        d[live, lo, lo] = np.inf
+        size[live, lo] += size[live, hi]
+        lab[live] = np.where(lab[live] == hi[:, None], lo[:, None], lab[live])
+    is_root = lab == np.arange(n)
+    rank = np.cumsum(is_root, axis=1) - 1
+    return torch.from_numpy(np.take_along_axis(rank, lab, axis=1)).to(dist.device)
+
+
 def threshold_groups(dist: Tensor, pi: Tensor, node_mask: Tensor, mode: str = "exact") -> Tensor:
-    """Group labels (B, N) from pairs with D <= pi; ``mode`` 'exact' (components) or 'official'."""
+    """Group labels (B, N) at threshold ``pi``; ``mode`` one of ``THRESHOLD_MODES``: 'exact' (components of the
+    pairs with D <= pi), 'official' (the reference relabelling of those pairs) or 'average' (average linkage)."""
+    if mode == "average":
+        return average_linkage(dist, pi, node_mask)
     adj = (dist <= pi) & pair_mask(node_mask)
     if mode == "exact":
         return connected_components(adj)
@@ -80,7 +128,7 @@ def threshold_groups(dist: Tensor, pi: Tensor, node_mask: Tensor, mode: str = "e
         adj_np = adj.cpu().numpy()
         labels = [official_relabel(adj_np[i, :n, :n]) for i, n in enumerate(counts)]
         return _pad_labels(labels, dist.shape[1]).to(dist.device)
-    raise ValueError(f"unknown grouping mode {mode!r}; valid: {GROUPING_MODES}")
+    raise ValueError(f"unknown grouping mode {mode!r}; valid: {THRESHOLD_MODES}")
 
 
 def ratio_groups(dist: Tensor, node_mask: Tensor, ratio: int) -> Tensor:

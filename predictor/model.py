@@ -8,6 +8,7 @@ future step.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, fields
 from functools import partial
 from typing import NamedTuple
@@ -107,6 +108,24 @@ class Output(NamedTuple):
     pi: Tensor
 
 
+def check_group_threshold_scale(value: object) -> float:
+    """``value`` as a float if it is a finite number > 0 (a valid ``group_threshold_scale``); ValueError otherwise."""
+    try:
+        scale = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValueError(f"group_threshold_scale must be a finite number > 0, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(scale) or scale <= 0:
+        raise ValueError(f"group_threshold_scale must be a finite number > 0, got {value!r}")
+    return scale
+
+
+def check_group_mode(value: object) -> str | None:
+    """``value`` if it is None (the config's grouping) or one of ``grouping.THRESHOLD_MODES``; ValueError otherwise."""
+    if value is None or (isinstance(value, str) and value in grouping.THRESHOLD_MODES):
+        return value
+    raise ValueError(f"group_mode must be one of {', '.join(grouping.THRESHOLD_MODES)} (or None), got {value!r}")
+
+
 class GroupAssigner(nn.Module):
     """F_phi (Conv2d 2 -> C, kernel (3, 1) over time) and the learnable threshold pi."""
 
@@ -138,28 +157,72 @@ class Integrator(nn.Module):
 
 
 class GPGraph(nn.Module):
-    """GP-Graph around a registered backbone. ``forward`` takes padded batches; see ``Output``."""
+    """GP-Graph around a registered backbone. ``forward`` takes padded batches; see ``Output``.
 
-    def __init__(self, config: GPGraphConfig | None = None) -> None:
+    ``group_threshold_scale`` (default 1.0, finite and > 0) is an inference-time calibration of the hard group
+    assignment: pedestrians i, j are linked when D_ij <= pi * group_threshold_scale, so with 'exact' grouping
+    (connected components of the links) a scale below 1 only ever splits groups (the partition refines) and
+    one above 1 only merges them ('official' relabelling is order-dependent and need not refine). It is not a
+    parameter and not part of ``config``: the learned pi, the soft assignment (which only shapes gradients)
+    and the training losses are unchanged, and 1.0 is exactly the uncalibrated model. Checkpoints may carry a
+    calibrated value in their meta (``predictor.checkpoint.load_model``). It has no effect with 'ratio'
+    grouping or without the group branches.
+
+    ``group_mode`` (default None: ``config.grouping``, exactly as trained) overrides how the hard assignment
+    turns D and pi * group_threshold_scale into groups, one of ``grouping.THRESHOLD_MODES``; 'average'
+    (average-linkage clustering of D cut at the threshold, which does not chain people through intermediate
+    neighbours) exists only as this override. Like the scale it is an inference-time setting outside
+    ``config`` (training builds its model with the default None), and checkpoints may carry it in their meta.
+    """
+
+    def __init__(self, config: GPGraphConfig | None = None, group_threshold_scale: float = 1.0,
+                 group_mode: str | None = None) -> None:
         super().__init__()
         self.config = config or GPGraphConfig()
+        self.group_threshold_scale = group_threshold_scale
+        self.group_mode = group_mode
         n_branches = sum(self.config.branches)
         n_backbones = 1 if self.config.weight_share else n_branches
         self.backbones = nn.ModuleList(make_backbone(self.config.backbone) for _ in range(n_backbones))
         self.assigner = GroupAssigner(self.config.embed_channels, self.config.threshold_init)
         self.integrator = Integrator(n_branches) if self.config.integration == "mlp" else None
 
+    @property
+    def group_threshold_scale(self) -> float:
+        """Multiplier of the learned threshold pi in the hard group assignment (validated on assignment)."""
+        return self._group_threshold_scale
+
+    @group_threshold_scale.setter
+    def group_threshold_scale(self, value: float) -> None:
+        self._group_threshold_scale = check_group_threshold_scale(value)
+
+    @property
+    def group_mode(self) -> str | None:
+        """Inference override of ``config.grouping`` (None: the config's; validated on assignment)."""
+        return self._group_mode
+
+    @group_mode.setter
+    def group_mode(self, value: str | None) -> None:
+        self._group_mode = check_group_mode(value)
+
+    @property
+    def effective_group_mode(self) -> str:
+        """The grouping the hard assignment uses: ``group_mode``, else ``config.grouping``."""
+        return self.config.grouping if self._group_mode is None else self._group_mode
+
     def assign(self, obs_abs: Tensor, node_mask: Tensor) -> tuple[Tensor, Tensor]:
-        """Pair distances D (B, N, N) and group labels (B, N)."""
+        """Pair distances D (B, N, N) and group labels (B, N) (``effective_group_mode`` at pi * scale)."""
         dist = self.assigner(obs_abs)
         pi = self.assigner.threshold
+        mode = self.effective_group_mode
         with torch.no_grad():
             if not self.config.uses_groups:  # backbone alone: every pedestrian is its own group
                 labels = torch.arange(dist.shape[1], device=dist.device).expand(dist.shape[0], -1).clone()
-            elif self.config.grouping == "ratio":
+            elif mode == "ratio":
                 labels = grouping.ratio_groups(dist, node_mask, self.config.group_ratio)
             else:
-                labels = grouping.threshold_groups(dist, pi, node_mask, self.config.grouping)
+                pi_eff = pi * self.group_threshold_scale  # exact for 1.0: the uncalibrated model
+                labels = grouping.threshold_groups(dist, pi_eff, node_mask, mode)
         return dist, labels
 
     def _branches(self, x: Tensor, xg: Tensor, labels: Tensor, node_mask: Tensor) -> list[Tuple3]:

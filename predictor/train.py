@@ -53,6 +53,9 @@ class TrainConfig:
         seed: seeds the numpy Generator (shuffling, rotations) and the initial weights.
         eval_every: validation ADE/FDE at epochs 0, N, 2N, ... and the last (0: never); does not affect
             which checkpoint is kept.
+        init: a checkpoint (packaged name or path) whose weights start the training instead of random ones
+            (fine-tuning, e.g. from a crowdsim-trained model); its architecture must equal ``model``'s (loss
+            weights such as ``bce_weight`` may differ); "" = random initial weights.
     """
 
     epochs: int = 300
@@ -67,6 +70,7 @@ class TrainConfig:
     max_pairs: int | None = None
     seed: int = 0
     eval_every: int = 10
+    init: str = ""
     model: GPGraphConfig = field(default_factory=GPGraphConfig)
 
     def __post_init__(self) -> None:
@@ -229,6 +233,24 @@ def _start_log(path: Path, fresh: bool) -> None:
         tmp.replace(path)
 
 
+LOSS_ONLY_FIELDS = ("bce_weight",)  # GPGraphConfig fields that change the loss, not the weights' layout
+
+
+def initial_weights(model: GPGraph, init: str) -> None:
+    """Load the weights of checkpoint ``init`` into ``model`` (ValueError naming the differing architecture
+    fields when they do not match)."""
+    from predictor.checkpoint import load_model
+
+    source, _ = load_model(init)
+    mine = {k: v for k, v in model.config.to_dict().items() if k not in LOSS_ONLY_FIELDS}
+    theirs = {k: v for k, v in source.config.to_dict().items() if k not in LOSS_ONLY_FIELDS}
+    if mine != theirs:
+        diff = ", ".join(f"{k} {theirs.get(k)!r} (init) vs {mine.get(k)!r}" for k in sorted(set(mine) | set(theirs))
+                         if mine.get(k) != theirs.get(k))
+        raise ValueError(f"--init {init}: architecture differs: {diff}")
+    model.load_state_dict(source.state_dict())
+
+
 def train(
     cfg: TrainConfig, train_windows: list[Window], val_windows: list[Window], out: str | Path,
     resume: bool = False, progress: bool = True, device: torch.device | str = "cpu",
@@ -245,7 +267,10 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)  # initial weights only; nothing random runs inside the model
-    model = GPGraph(cfg.model).to(device)
+    model = GPGraph(cfg.model)
+    if cfg.init:
+        initial_weights(model, cfg.init)
+    model = model.to(device)
     opt, sched = _optimiser(model, cfg)
     start, best = (0, float("inf"))
     if resume and (out / "last.pt").is_file():

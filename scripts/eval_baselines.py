@@ -2,6 +2,8 @@
 
     python scripts/eval_baselines.py --data out/synthetic_predictor/data --seed 0 --trials 10 \
         --json out/synthetic_predictor/eval/constant-velocity.json
+    python scripts/eval_baselines.py --data out/synthetic_predictor/data --split val --trials 1 \
+        --json out/synthetic_predictor/eval/baselines-val.json   # choose a distance rule on val
 
 ``gpgraph evaluate`` only takes GP-Graph checkpoints, so this runs ``load_predictor("constant-velocity")``
 (last-step velocity, per-pedestrian velocity noise of 0.05 m per step held over the horizon: its own
@@ -10,7 +12,8 @@ best-of-K ADE/FDE, COL, TCC averaged over pedestrians and trials, and, since eve
 group, the all-singletons PW/G-MITRE baseline. Also reports the deterministic extrapolation (K = 1, no
 noise) as ``ade_k1``/``fde_k1``, and under ``proximity`` distance-threshold grouping baselines: connected
 components of the pedestrians closer than R m at the last observed step (``last``) or at every one of the 8
-observed steps (``all``), R = 1.0 and 1.5 m (crowdsim spawns group members 0.75 m apart).
+observed steps (``all``), R = 0.5 ... 2.0 m (crowdsim spawns group members 0.75 m apart), and the best of them
+by PW F1 (``best_proximity``). ``--split val`` scores DATA/val instead (to choose a rule without the test split).
 """
 
 from __future__ import annotations
@@ -51,6 +54,24 @@ def proximity_scores(windows: list) -> dict[str, dict[str, float]]:
     return out
 
 
+def f1(precision: float | None, recall: float | None) -> float:
+    """Harmonic mean of precision and recall; NaN when either is missing (None or NaN), 0 when both are 0."""
+    if precision is None or recall is None or precision != precision or recall != recall:
+        return float("nan")
+    return 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+
+
+def best_rule(scores: dict[str, dict[str, float]]) -> dict:
+    """The rule of ``proximity_scores`` with the highest PW F1 (NaN counts as lowest), with both F1s."""
+    def pw_f1(item: tuple[str, dict]) -> float:
+        v = f1(item[1]["pw_precision"], item[1]["pw_recall"])
+        return -1.0 if v != v else v
+
+    name, s = max(scores.items(), key=pw_f1)
+    return {"rule": name, **s, "pw_f1": f1(s["pw_precision"], s["pw_recall"]),
+            "gmitre_f1": f1(s["gmitre_precision"], s["gmitre_recall"])}
+
+
 def evaluate_cv(windows: list, seed: int, trials: int, n_samples: int) -> dict:
     """Metrics dict shaped like ``predictor.evaluate.evaluate``'s, for the constant-velocity predictor."""
     rng = np.random.default_rng(seed)
@@ -79,21 +100,26 @@ def evaluate_cv(windows: list, seed: int, trials: int, n_samples: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--data", type=Path, required=True, help="dataset folder (DATA/test is scored)")
+    p.add_argument("--data", type=Path, required=True, help="dataset folder (DATA/SPLIT is scored)")
+    p.add_argument("--split", choices=("train", "val", "test"), default="test")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--trials", type=int, default=10)
     p.add_argument("--samples", type=int, default=20)
     p.add_argument("--json", type=Path, default=None)
     args = p.parse_args(argv)
-    windows = load_windows(split_folder(args.data, "test"))
+    windows = load_windows(split_folder(args.data, args.split))
     if not windows:
-        p.error(f"no windows in {split_folder(args.data, 'test')}")
+        p.error(f"no windows in {split_folder(args.data, args.split)}")
     result = evaluate_cv(windows, args.seed, args.trials, args.samples)
+    result["split"] = args.split
     print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in result.items()))
     if has_labels(windows):
         result["proximity"] = proximity_scores(windows)
         for r, scores in result["proximity"].items():
             print(f"proximity {r}: " + " ".join(f"{k}={v:.4f}" for k, v in scores.items()))
+        result["best_proximity"] = best_rule(result["proximity"])
+        print("best proximity rule by PW F1: " + " ".join(
+            f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in result["best_proximity"].items()))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
 

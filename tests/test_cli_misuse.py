@@ -55,6 +55,8 @@ CASES = [
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --resume"),
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --device cuda"),
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --device gpu"),
+    ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --init no-such-checkpoint"),
+    ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --backbone sgcn --init gpgraph-stgcnn-synthetic"),
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --eval-every -1"),
     ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/empty --device cuda --json {tmp}/r.json"),
     ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/empty --json {tmp}/afile/r.json"),

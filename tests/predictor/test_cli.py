@@ -176,3 +176,12 @@ def test_list_prints_every_packaged_name_and_each_loads(capsys) -> None:
     assert set(names) == {p.stem for p in PACKAGE_CHECKPOINTS.glob("*.safetensors")} | {"constant-velocity"}
     assert "gpgraph-stgcnn-synthetic" in names
     load_predictor(names[0]), load_predictor(names[-1])  # the listed names are what load_predictor takes
+
+
+def test_train_init_starts_from_the_checkpoint_and_records_it(synthetic_data: Path, tmp_path: Path) -> None:
+    from predictor.checkpoint import load_model
+
+    out = tmp_path / "ft"
+    assert _train(synthetic_data, out, 1, "--backbone", "stgcnn", "--init", "gpgraph-stgcnn-synthetic") == 0
+    _, meta = load_model(out / "best.pt")
+    assert meta["train"]["init"] == "gpgraph-stgcnn-synthetic"

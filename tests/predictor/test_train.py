@@ -80,3 +80,19 @@ def test_validation_loss_does_not_depend_on_batching() -> None:
     one = validation_loss(model, [collate(windows)])
     assert validation_loss(model, sized) == pytest.approx(one, rel=1e-5)
     assert validation_loss(model, eval_batches(windows, batch_size=2, max_pairs=0)) == pytest.approx(one, rel=1e-5)
+
+
+def test_init_loads_a_checkpoints_weights_and_refuses_another_architecture() -> None:
+    from predictor.checkpoint import load_model
+    from predictor.train import initial_weights
+
+    source, _ = load_model("gpgraph-stgcnn-synthetic")  # GP-Graph+S: bce_weight 2 (a loss weight only)
+    torch.manual_seed(123)
+    model = GPGraph(GPGraphConfig(backbone="stgcnn", bce_weight=0.0))
+    pairs = zip(model.state_dict().values(), source.state_dict().values(), strict=True)
+    assert any(not torch.equal(a, b) for a, b in pairs)
+    initial_weights(model, "gpgraph-stgcnn-synthetic")
+    for (k, a), b in zip(model.state_dict().items(), source.state_dict().values(), strict=True):
+        assert torch.equal(a, b), k
+    with pytest.raises(ValueError, match="backbone 'stgcnn' \\(init\\) vs 'sgcn'"):
+        initial_weights(GPGraph(GPGraphConfig(backbone="sgcn")), "gpgraph-stgcnn-synthetic")
