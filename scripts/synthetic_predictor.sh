@@ -69,10 +69,14 @@ evaluate() {
 }
 
 package() {
-    for model in gpgraph-stgcnn-synthetic stgcnn-synthetic; do
-        "$VENV/bin/python" scripts/package_checkpoint.py "$RUNS/$model/best.pt" \
-            "predictor/checkpoints/$model.safetensors" --scene synthetic --data "$DATA"
-    done
+    # GP-Graph+S groups by average linkage at 1.15 x its learned threshold, chosen on the validation split
+    # (scripts/sweep_group_threshold.py --group-mode average; RESULTS.md "Version 2.1"); rerun that sweep after
+    # retraining before trusting the scale.
+    "$VENV/bin/python" scripts/package_checkpoint.py "$RUNS/gpgraph-stgcnn-synthetic/best.pt" \
+        "predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors" --scene synthetic --data "$DATA" \
+        --group-mode average --group-threshold-scale 1.15
+    "$VENV/bin/python" scripts/package_checkpoint.py "$RUNS/stgcnn-synthetic/best.pt" \
+        "predictor/checkpoints/stgcnn-synthetic.safetensors" --scene synthetic --data "$DATA"
 }
 
 case $stage in

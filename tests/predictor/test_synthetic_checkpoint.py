@@ -23,13 +23,14 @@ from predictor.windows import Window, load_windows
 NAME = "gpgraph-stgcnn-synthetic"
 SEED = 424242  # training used preset seeds 1000-1035 (no plaza seed near this one)
 DURATION_S = 60.0
-# Floors, with margin below what the shipped checkpoint measured with seed 424242: best-of-20 ADE on the preset
-# plaza 0.441 vs 0.497 m for constant velocity (0.89x); in the default 30-person plaza PW precision/recall
-# 0.71/0.73, PW F1 0.72 vs 0.59 for the best last-step distance threshold, G-MITRE F1 0.84; best-of-20 ADE there
-# 0.406 vs 0.336 m (1.21x, the xfail below).
+# Floors, with margin below what the shipped checkpoint measured with seed 424242 (grouping: average linkage at
+# 1.15 x the learned threshold, from its meta; chosen on the crowdsim validation split): best-of-20 ADE on the
+# preset plaza 0.442 vs 0.499 m for constant velocity (0.89x); in the default 30-person plaza PW precision/recall
+# 0.77/0.64 (connected components, the grouping it was trained with: 0.71/0.73), PW F1 0.70 vs 0.60 for the best
+# last-step distance threshold, G-MITRE F1 0.83; best-of-20 ADE there 0.412 vs 0.337 m (1.22x, the xfail below).
 MAX_ADE_RATIO = 0.97  # best-of-20 ADE of the model / that of constant velocity
-MIN_PW_PRECISION = 0.65
-MIN_PW_RECALL = 0.65
+MIN_PW_PRECISION = 0.70
+MIN_PW_RECALL = 0.60
 GMITRE_F1_MARGIN = 0.2  # over all singletons
 PROXIMITY_RADII_M = (0.9, 1.0, 1.1, 1.2, 1.3, 1.5, 2.0)  # members spawn 0.75 m apart
 PW_F1_MARGIN_OVER_PROXIMITY = 0.1  # over the best of these radii, chosen in hindsight
