@@ -1,0 +1,89 @@
+"""Tables for scripts/synthetic_pretraining.sh: ADE/FDE (m) per scene and variant, mean ± sd over seeds, the
+five-scene average, and a paired comparison of `pretrain` against `real` over every (scene, seed) pair.
+
+    python scripts/synthetic_pretraining_report.py out/synthetic_pretraining/eval
+
+Reads `<variant>-<scene>-s<seed>-<protocol>.json` and `zeroshot[avg]-<scene>-<protocol>.json` (gpgraph evaluate).
+The paired test is an exact two-sided sign test on the per-pair FDE difference (no normality assumed).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from math import comb
+from pathlib import Path
+
+import numpy as np
+
+SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
+VARIANTS = ("real", "pretrain", "zeroshot", "zeroshotavg")
+NAME = re.compile(r"^(real|pretrain|zeroshot|zeroshotavg)-(\w+?)(?:-s(\d+))?-(iid|paper)$")
+
+
+def load(folder: Path) -> dict[tuple[str, str, str], dict[int, tuple[float, float]]]:
+    """(variant, scene, protocol) -> {seed: (ade, fde)}; zero-shot runs have seed -1."""
+    out: dict[tuple[str, str, str], dict[int, tuple[float, float]]] = {}
+    for path in sorted(folder.glob("*.json")):
+        m = NAME.match(path.stem)
+        if not m:
+            continue
+        variant, scene, seed, protocol = m.groups()
+        d = json.loads(path.read_text())
+        out.setdefault((variant, scene, protocol), {})[int(seed) if seed else -1] = (d["ade"], d["fde"])
+    return out
+
+
+def sign_test(diffs: np.ndarray) -> float:
+    """Exact two-sided sign test p-value of the non-zero differences."""
+    d = diffs[diffs != 0]
+    n, k = len(d), int((d > 0).sum())
+    if n == 0:
+        return 1.0
+    tail = sum(comb(n, i) for i in range(0, min(k, n - k) + 1)) / 2**n
+    return min(1.0, 2 * tail)
+
+
+def cell(values: dict[int, tuple[float, float]]) -> str:
+    if not values:
+        return "–"
+    a = np.array(list(values.values()))
+    if len(a) == 1:
+        return f"{a[0, 0]:.3f}/{a[0, 1]:.3f}"
+    return f"{a[:, 0].mean():.3f}±{a[:, 0].std(ddof=1):.3f} / {a[:, 1].mean():.3f}±{a[:, 1].std(ddof=1):.3f}"
+
+
+def table(res: dict, protocol: str) -> list[str]:
+    lines = [f"### Protocol {protocol}: ADE/FDE (m), mean ± sd over seeds", "",
+             "| variant | " + " | ".join(SCENES) + " | average (seeds) |", "|---" * (len(SCENES) + 2) + "|"]
+    for v in VARIANTS:
+        row = [cell(res.get((v, s, protocol), {})) for s in SCENES]
+        seeds = sorted(set.intersection(*[set(res.get((v, s, protocol), {})) for s in SCENES]))
+        avg = "–"
+        if seeds:
+            per_seed = np.array([[np.mean([res[(v, s, protocol)][k][j] for s in SCENES]) for j in (0, 1)]
+                                 for k in seeds])
+            avg = f"{per_seed[:, 0].mean():.3f}/{per_seed[:, 1].mean():.3f} ({len(seeds)})"
+        lines.append(f"| {v} | " + " | ".join(row) + f" | {avg} |")
+    pairs = [(res[("pretrain", s, protocol)][k][1], res[("real", s, protocol)][k][1]) for s in SCENES
+             for k in sorted(set(res.get(("pretrain", s, protocol), {})) & set(res.get(("real", s, protocol), {})))]
+    if pairs:
+        d = np.array([p - r for p, r in pairs])
+        lines += ["", f"pretrain - real FDE over {len(d)} (scene, seed) pairs: mean {d.mean():+.4f} m, "
+                      f"pretrain better in {(d < 0).sum()}, worse in {(d > 0).sum()}; sign test p = {sign_test(d):.3g}"]
+    return [*lines, ""]
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 1 or not Path(argv[0]).is_dir():
+        print("usage: synthetic_pretraining_report.py EVAL_DIR", file=sys.stderr)
+        return 2
+    res = load(Path(argv[0]))
+    for protocol in ("iid", "paper"):
+        print("\n".join(table(res, protocol)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
