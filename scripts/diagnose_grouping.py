@@ -35,7 +35,7 @@ from predictor.cli import SPLITS, split_folder
 from predictor.windows import load_windows
 
 sys.path.insert(0, str(Path(__file__).parent))
-from eval_baselines import f1
+from eval_baselines import f1, nan_to_none
 
 SCALES = (0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5)
 METHODS = ("components", "official", "average", "complete")
@@ -118,14 +118,8 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-
-        def clean(v):
-            if isinstance(v, dict):
-                return {k: clean(x) for k, x in v.items()}
-            return None if isinstance(v, float) and v != v else v
-
         out = {"checkpoint": str(args.checkpoint), "split": args.split, "learned_pi": pi, "rows": rows}
-        args.json.write_text(json.dumps(clean(out), indent=2, allow_nan=False) + "\n")
+        args.json.write_text(json.dumps(nan_to_none(out), indent=2, allow_nan=False) + "\n")
     return 0
 
 

@@ -54,6 +54,13 @@ def proximity_scores(windows: list) -> dict[str, dict[str, float]]:
     return out
 
 
+def nan_to_none(v):
+    """``v`` with every NaN float (nested in dicts) replaced by None, for strict JSON."""
+    if isinstance(v, dict):
+        return {k: nan_to_none(x) for k, x in v.items()}
+    return None if isinstance(v, float) and v != v else v
+
+
 def f1(precision: float | None, recall: float | None) -> float:
     """Harmonic mean of precision and recall; NaN when either is missing (None or NaN), 0 when both are 0."""
     if precision is None or recall is None or precision != precision or recall != recall:
@@ -122,11 +129,6 @@ def main(argv: list[str] | None = None) -> int:
             f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in result["best_proximity"].items()))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-
-        def nan_to_none(v):
-            if isinstance(v, dict):
-                return {k: nan_to_none(x) for k, x in v.items()}
-            return None if isinstance(v, float) and v != v else v
 
         clean = nan_to_none(result)
         args.json.write_text(json.dumps(clean, indent=2, allow_nan=False) + "\n")

@@ -239,14 +239,9 @@ def test_cli_group_mode(synthetic_data: Path, tmp_path: Path) -> None:
 @pytest.mark.parametrize("value", ["single", "ratio", "", "Average"])
 @pytest.mark.parametrize("command", ["evaluate", "predict"])
 def test_cli_bad_group_mode_is_one_line_exit_2(tmp_path: Path, capsys, command: str, value: str) -> None:
-    hist = tmp_path / "h.npy"
-    np.save(hist, np.zeros((8, 3, 2)))
-    if command == "evaluate":
-        args = ["evaluate", "--checkpoint", "gpgraph-stgcnn-synthetic", "--data", str(tmp_path),
-                "--json", str(tmp_path / "r.json")]
-    else:
-        args = ["predict", "--checkpoint", "gpgraph-stgcnn-synthetic", "--history", str(hist),
-                "--out", str(tmp_path / "p.npz")]
+    from test_group_threshold import misuse_command
+
+    args = misuse_command(tmp_path, command)
     before = sorted(p.name for p in tmp_path.rglob("*"))
     with pytest.raises(SystemExit) as exc:
         main([*args, f"--group-mode={value}"])

@@ -39,6 +39,31 @@ def _scene(seed: int, b: int = 3, n: int = 9) -> tuple[torch.Tensor, torch.Tenso
     return obs_abs, obs_rel, mask
 
 
+def misuse_command(tmp_path: Path, command: str) -> list[str]:
+    """A valid `gpgraph evaluate` or `predict` command line (with a history file in tmp_path) for misuse tests
+    to append one bad option to."""
+    hist = tmp_path / "h.npy"
+    np.save(hist, np.zeros((8, 3, 2)))
+    if command == "evaluate":
+        return ["evaluate", "--checkpoint", "gpgraph-stgcnn-synthetic", "--data", str(tmp_path),
+                "--json", str(tmp_path / "r.json")]
+    return ["predict", "--checkpoint", "gpgraph-stgcnn-synthetic", "--history", str(hist),
+            "--out", str(tmp_path / "p.npz")]
+
+
+def _assert_refining(label_sequence, mask: torch.Tensor) -> torch.Tensor:
+    """Each labelling (B, N) of the sequence refines the previous one (never merges more); the last counts."""
+    prev, prev_count = None, None
+    for labels in label_sequence:
+        count = grouping.group_count(labels, mask)
+        if prev is not None:
+            assert (count >= prev_count).all()
+            for i, m in enumerate(mask.sum(dim=1).tolist()):
+                assert _refines(labels[i, :m].numpy(), prev[i, :m].numpy())
+        prev, prev_count = labels, count
+    return prev_count
+
+
 def _refines(fine: np.ndarray, coarse: np.ndarray) -> bool:
     """Every group of ``fine`` lies inside one group of ``coarse``."""
     return all(len(np.unique(coarse[fine == g])) == 1 for g in np.unique(fine))
@@ -92,16 +117,8 @@ def test_smaller_scale_never_merges_more_on_random_distances(seed: int) -> None:
     dist = torch.as_tensor((d + d.transpose(0, 2, 1)) / 2 * (1 - np.eye(n)), dtype=torch.float32)
     mask = torch.arange(n)[None] < torch.as_tensor(rng.integers(1, n + 1, size=b))[:, None]
     pi = torch.tensor([float(rng.uniform(0.2, 1.5))])
-    prev, prev_count = None, None
-    for s in SCALES_DOWN:
-        labels = grouping.threshold_groups(dist, pi * s, mask)
-        count = grouping.group_count(labels, mask)
-        if prev is not None:
-            assert (count >= prev_count).all()
-            for i, m in enumerate(mask.sum(dim=1).tolist()):
-                assert _refines(labels[i, :m].numpy(), prev[i, :m].numpy())
-        prev, prev_count = labels, count
-    assert (prev_count == mask.sum(dim=1)).all()  # a tiny scale leaves everybody alone
+    last = _assert_refining((grouping.threshold_groups(dist, pi * s, mask) for s in SCALES_DOWN), mask)
+    assert (last == mask.sum(dim=1)).all()  # a tiny scale leaves everybody alone
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -110,17 +127,13 @@ def test_smaller_scale_never_merges_more_in_the_model(seed: int) -> None:
     with torch.no_grad():
         model.assigner.threshold.fill_(float(np.random.default_rng(seed).uniform(0.3, 1.5)))
     obs_abs, obs_rel, mask = _scene(100 + seed)
-    prev, prev_count = None, None
-    for s in SCALES_DOWN:
-        model.group_threshold_scale = s
+
+    def labels_at(scale: float) -> torch.Tensor:
+        model.group_threshold_scale = scale
         with torch.no_grad():
-            labels = model(obs_abs, obs_rel, mask).groups
-        count = grouping.group_count(labels, mask)
-        if prev is not None:
-            assert (count >= prev_count).all()
-            for i, m in enumerate(mask.sum(dim=1).tolist()):
-                assert _refines(labels[i, :m].numpy(), prev[i, :m].numpy())
-        prev, prev_count = labels, count
+            return model(obs_abs, obs_rel, mask).groups
+
+    _assert_refining((labels_at(s) for s in SCALES_DOWN), mask)
 
 
 @pytest.mark.parametrize("bad", [0, -0.5, math.nan, math.inf, -math.inf, "x", None, True])
@@ -195,14 +208,7 @@ def test_cli_evaluate_scale_and_split(synthetic_data: Path, tmp_path: Path) -> N
 @pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "-inf", "abc", ""])
 @pytest.mark.parametrize("command", ["evaluate", "predict"])
 def test_cli_bad_scale_is_one_line_exit_2(tmp_path: Path, capsys, command: str, value: str) -> None:
-    hist = tmp_path / "h.npy"
-    np.save(hist, np.zeros((8, 3, 2)))
-    if command == "evaluate":
-        args = ["evaluate", "--checkpoint", "gpgraph-stgcnn-synthetic", "--data", str(tmp_path),
-                "--json", str(tmp_path / "r.json")]
-    else:
-        args = ["predict", "--checkpoint", "gpgraph-stgcnn-synthetic", "--history", str(hist),
-                "--out", str(tmp_path / "p.npz")]
+    args = misuse_command(tmp_path, command)
     before = sorted(p.name for p in tmp_path.rglob("*"))
     with pytest.raises(SystemExit) as exc:
         main([*args, f"--group-threshold-scale={value}"])  # '=' so that '-inf' is read as a value
