@@ -4,11 +4,12 @@
 #   real      random initial weights, EPOCHS epochs on the split's train set;
 #   pretrain  initial weights from gpgraph-stgcnn-synthetic (GP-Graph+S trained on crowdsim's realistic-v1
 #             preset only, RESULTS.md "Default synthetic predictor"), then the same EPOCHS epochs;
+#   pretrainlow  (only with VARIANTS="pretrainlow") the same fine-tuning at lr 0.001 instead of 0.01;
 #   zeroshot  gpgraph-stgcnn-synthetic itself, never trained on real people, grouping as the fine-tuned runs
 #             (connected components); zeroshotavg: the same with its packaged average-linkage grouping.
 # Every run keeps the checkpoint with the lowest validation loss; evaluation is the RESULTS.md protocol (test
 # split, seed 0, 10 trials, iid and paper). One thread per process, JOBS processes at a time.
-#   bash scripts/synthetic_pretraining.sh train SEED [SEED ...]    # trains the missing runs
+#   bash scripts/synthetic_pretraining.sh train SEED [SEED ...]    # trains the missing runs (VARIANTS=...)
 #   bash scripts/synthetic_pretraining.sh evaluate                  # evaluates every finished run + zero-shot
 #   bash scripts/synthetic_pretraining.sh report                    # the per-scene table (python)
 # Outputs under OUT (default out/synthetic_pretraining): runs/<variant>-<scene>-s<seed>/, eval/*.json.
@@ -27,6 +28,7 @@ train_one() {  # variant scene seed
   local run="$out/runs/$1-$2-s$3" init=()
   [ -f "$run/done" ] && return 0
   [ "$1" = pretrain ] && init=(--init gpgraph-stgcnn-synthetic)
+  [ "$1" = pretrainlow ] && init=(--init gpgraph-stgcnn-synthetic --lr 0.001)
   rm -rf "$run"
   "$py" -m predictor.cli train --threads 1 --backbone stgcnn --data "$data/$2" --out "$run" --epochs "$epochs" \
     --seed "$3" --eval-every 0 --quiet "${init[@]}" > "$run.log" 2>&1
@@ -46,7 +48,7 @@ export out data py epochs
 
 case $stage in
   train)
-    for seed in "$@"; do for scene in $scenes; do for variant in real pretrain; do
+    for seed in "$@"; do for scene in $scenes; do for variant in ${VARIANTS:-real pretrain}; do
       echo "$variant $scene $seed"
     done; done; done | xargs -P "$jobs" -L 1 bash -c 'train_one "$0" "$1" "$2"'
     ;;

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
-VARIANTS = ("real", "pretrain", "zeroshot", "zeroshotavg")
-NAME = re.compile(r"^(real|pretrain|zeroshot|zeroshotavg)-(\w+?)(?:-s(\d+))?-(iid|paper)$")
+VARIANTS = ("real", "pretrain", "pretrainlow", "zeroshot", "zeroshotavg")
+NAME = re.compile(r"^(real|pretrain|pretrainlow|zeroshot|zeroshotavg)-(\w+?)(?:-s(\d+))?-(iid|paper)$")
 
 
 def load(folder: Path) -> dict[tuple[str, str, str], dict[int, tuple[float, float]]]:
