@@ -66,12 +66,14 @@ def table(res: dict, protocol: str) -> list[str]:
                                  for k in seeds])
             avg = f"{per_seed[:, 0].mean():.3f}/{per_seed[:, 1].mean():.3f} ({len(seeds)})"
         lines.append(f"| {v} | " + " | ".join(row) + f" | {avg} |")
-    pairs = [(res[("pretrain", s, protocol)][k][1], res[("real", s, protocol)][k][1]) for s in SCENES
-             for k in sorted(set(res.get(("pretrain", s, protocol), {})) & set(res.get(("real", s, protocol), {})))]
-    if pairs:
-        d = np.array([p - r for p, r in pairs])
-        lines += ["", f"pretrain - real FDE over {len(d)} (scene, seed) pairs: mean {d.mean():+.4f} m, "
-                      f"pretrain better in {(d < 0).sum()}, worse in {(d > 0).sum()}; sign test p = {sign_test(d):.3g}"]
+    for variant in ("pretrain", "pretrainlow"):
+        pairs = [(res[(variant, s, protocol)][k][1], res[("real", s, protocol)][k][1]) for s in SCENES
+                 for k in sorted(set(res.get((variant, s, protocol), {})) & set(res.get(("real", s, protocol), {})))]
+        if pairs:
+            d = np.array([p - r for p, r in pairs])
+            lines += ["", f"{variant} - real FDE over {len(d)} (scene, seed) pairs: mean {d.mean():+.4f} m, "
+                          f"{variant} better in {(d < 0).sum()}, worse in {(d > 0).sum()}; "
+                          f"sign test p = {sign_test(d):.3g}"]
     return [*lines, ""]
 
 
