@@ -11,6 +11,7 @@
 # split, seed 0, 10 trials, iid and paper). One thread per process, JOBS processes at a time.
 #   bash scripts/synthetic_pretraining.sh train SEED [SEED ...]    # trains the missing runs (VARIANTS=...)
 #   bash scripts/synthetic_pretraining.sh evaluate                  # evaluates every finished run + zero-shot
+#   bash scripts/synthetic_pretraining.sh validate                  # the same runs on the validation splits
 #   bash scripts/synthetic_pretraining.sh report                    # the per-scene table (python)
 # Outputs under OUT (default out/synthetic_pretraining): runs/<variant>-<scene>-s<seed>/, eval/*.json.
 set -euo pipefail
@@ -66,10 +67,20 @@ case $stage in
       done; done
     } | xargs -P "$jobs" -L 1 bash -c 'eval_one "$0" "$@"'
     ;;
+  validate)  # best-of-20 ADE/FDE on each split's validation set (iid, 3 trials): a selection check without test
+    mkdir -p "$out/val"
+    for run in "$out"/runs/*-s*/; do
+      [ -f "$run/done" ] || continue
+      name=$(basename "$run"); scene=${name#*-}; scene=${scene%-s*}
+      echo "$run $scene $name"
+    done | xargs -P "$jobs" -L 1 bash -c 'f="$out/val/$2-iid.json"; [ -f "$f" ] || "$py" -m predictor.cli evaluate \
+      --threads 1 --checkpoint "$0/best.pt" --data "$data/$1" --split val --protocol iid --seed 0 --trials 3 --quiet \
+      --json "$f" > /dev/null'
+    ;;
   report)
     "$py" scripts/synthetic_pretraining_report.py "$out/eval"
     ;;
   *)
-    echo "usage: $0 train SEED [SEED ...] | evaluate | report" >&2; exit 2
+    echo "usage: $0 train SEED [SEED ...] | evaluate | validate | report" >&2; exit 2
     ;;
 esac
