@@ -163,10 +163,10 @@ def load_predictor(
     inference; None keeps the checkpoint's, or the grouping it was trained with. Both are checked, then
     ignored, for constant velocity.
     """
-    if group_threshold_scale is not None:
-        check_group_threshold_scale(group_threshold_scale)
-    check_group_mode(group_mode)
-    if str(name_or_path) in CONSTANT_VELOCITY_NAMES:
+    if str(name_or_path) in CONSTANT_VELOCITY_NAMES:  # load_model checks the options for every other name
+        if group_threshold_scale is not None:
+            check_group_threshold_scale(group_threshold_scale)
+        check_group_mode(group_mode)
         return ConstantVelocityPredictor()
     model, _ = load_model(name_or_path, backbone=backbone, grouping=grouping,
                           group_threshold_scale=group_threshold_scale, group_mode=group_mode)

@@ -17,6 +17,7 @@ import json
 import os
 import re
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -150,21 +151,23 @@ def load_model(
     model = GPGraph(cfg)
     load_state(model, state, str(path))
     if group_threshold_scale is None:
-        try:
-            group_threshold_scale = check_group_threshold_scale(meta.get(META_GROUP_THRESHOLD_SCALE, 1.0))
-        except ValueError as exc:
-            raise CheckpointError(f"checkpoint {path}: meta {exc}") from None
+        group_threshold_scale = _from_meta(meta, META_GROUP_THRESHOLD_SCALE, 1.0, check_group_threshold_scale, path)
     if group_mode is None:
-        try:
-            group_mode = check_group_mode(meta.get(META_GROUP_MODE))
-        except ValueError as exc:
-            raise CheckpointError(f"checkpoint {path}: meta {exc}") from None
+        group_mode = _from_meta(meta, META_GROUP_MODE, None, check_group_mode, path)
     model.group_threshold_scale = group_threshold_scale
     model.group_mode = group_mode
     return model.eval(), meta
 
 
-def meta_with_scale(model: GPGraph, meta: dict | None) -> dict:
+def _from_meta(meta: dict, key: str, default: Any, check: Callable[[Any], Any], path: Path) -> Any:
+    """``meta[key]`` (``default`` when absent) passed through ``check``; an invalid value is a CheckpointError."""
+    try:
+        return check(meta.get(key, default))
+    except ValueError as exc:
+        raise CheckpointError(f"checkpoint {path}: meta {exc}") from None
+
+
+def meta_with_calibration(model: GPGraph, meta: dict | None) -> dict:
     """``meta`` plus the model's ``group_threshold_scale`` when it is not 1.0 and its ``group_mode`` when not
     None (else without those keys), so a file records the calibration its model was saved with and an
     uncalibrated one stays as before."""
@@ -208,19 +211,20 @@ def save_atomic(obj: dict, path: str | Path) -> None:
 
 
 def save_model(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
-    """Save a model with its config inside (atomic); ``meta`` gains the model's calibration (``meta_with_scale``)."""
+    """Save a model with its config inside (atomic); ``meta`` gains the model's calibration
+    (``meta_with_calibration``)."""
     save_atomic(
         {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
-         "meta": meta_with_scale(model, meta)},
+         "meta": meta_with_calibration(model, meta)},
         path,
     )
 
 
 def export_packaged(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
     """Write a model as ``.safetensors`` with its config and ``meta`` (plus the model's calibration,
-    ``meta_with_scale``) as JSON metadata (for shipping)."""
+    ``meta_with_calibration``) as JSON metadata (for shipping)."""
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     metadata = {"format": FORMAT, "config": json.dumps(model.config.to_dict()),
-                "meta": json.dumps(meta_with_scale(model, meta))}
+                "meta": json.dumps(meta_with_calibration(model, meta))}
     save_file(state, str(path), metadata=metadata)
     os.chmod(path, 0o644)

@@ -34,7 +34,7 @@ from predictor.sampling import PROTOCOLS
 from predictor.windows import load_windows
 
 sys.path.insert(0, str(Path(__file__).parent))
-from eval_baselines import f1
+from eval_baselines import f1, nan_to_none
 
 DEFAULT_SCALES = (0.3, 0.4, 0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95, 1.0, 1.1, 1.25)
 
@@ -102,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{best['pw_f1']:.4f} with ADE/FDE within {100 * args.max_worse:g}% of {trained} at scale 1.0)")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        clean = [{k: (None if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in rows]
+        clean = [nan_to_none(r) for r in rows]
         out = {"checkpoint": str(args.checkpoint), "split": args.split, "protocol": args.protocol,
                "seed": args.seed, "trials": args.trials, "n_samples": cfg.n_samples, "windows": len(windows),
                "learned_pi": model.assigner.threshold.item(), "max_worse": args.max_worse,
