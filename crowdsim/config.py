@@ -85,6 +85,15 @@ class GroupForceParams:
     gaze: -beta1 alpha v, alpha the head rotation (rad) beyond the vision half-angle needed to see the
     centre of mass of the other members; coherence: beta2 towards the group's centre of mass when farther
     than (n - 1) / 2 m; repulsion: beta3 away from each member closer than d0 (centre to centre).
+
+    Catch-up (added here): +beta1' gamma v, gamma (rad) how far the others' centre lies ahead of abreast
+    (90 deg - its angle from the heading, when positive). With beta1' = beta1 a member who has fallen behind
+    speeds up as much as one who has drawn ahead slows down, the symmetric along-track pull of Zanlungo et al.'s
+    group potential (PRE 2014); with the gaze term alone a group is held to its slowest member and brakes on
+    every perturbation, and pairs walked at 0.85 and triples at 0.78 of their desired speed in a sparse plaza
+    against 0.94 for people alone. Both terms fade linearly to zero as the others' centre comes within
+    `gaze_fade_m` of the member (the middle of an abreast triple), where its direction is undefined. The
+    calibration: scripts/calibrate_group_speed.py; the test: tests/crowdsim/test_fundamental_diagram.py.
     """
 
     gaze_strength: float = 4.0  # beta1, 1/s (multiplies alpha [rad] * v [m/s])
@@ -92,11 +101,14 @@ class GroupForceParams:
     repulsion_strength_mps2: float = 1.0  # beta3
     repulsion_distance_m: float = 0.8  # d0
     vision_half_angle_deg: float = 90.0
+    catch_up_strength: float = 4.0  # 1/s, the same as beta1: the pull is symmetric
+    gaze_fade_m: float = 0.4
 
     def __post_init__(self) -> None:
-        for name in ("gaze_strength", "coherence_strength_mps2", "repulsion_strength_mps2"):
+        for name in ("gaze_strength", "coherence_strength_mps2", "repulsion_strength_mps2", "catch_up_strength"):
             _non_negative(name, getattr(self, name))
         _positive("repulsion_distance_m", self.repulsion_distance_m)
+        _positive("gaze_fade_m", self.gaze_fade_m)
         _in_range("vision_half_angle_deg", self.vision_half_angle_deg, 0.0, 180.0)
 
 
@@ -106,7 +118,9 @@ class GroupConfig:
 
     Group sizes follow a zero-truncated Poisson with rate `size_poisson_rate`, capped at `max_size`
     (lambda = 1.1 puts about two thirds of people in groups, mostly pairs; FIELD_NOTES). A group of
-    size n walks at a shared speed drawn from N(1.34 - 0.04 (n - 1), 0.26) m/s, clipped.
+    size n walks at a shared desired speed drawn from N(1.34 - 0.02 (n - 1), 0.26) m/s, clipped. The drop is
+    calibrated (scripts/calibrate_group_speed.py) so that the walking speeds groups reach at low density fall by
+    Moussaïd et al.'s (2010, Fig. 2) 0.04 m/s per member: the group terms slow them a little on top.
     Events are Poisson processes per group, rates in 1/s: `leave_rate_hz` makes one member of a group
     of two or more leave (new goal, new singleton label); `merge_rate_hz` makes a group join the
     nearest other group within `merge_distance_m` walking the same way (shared goal and label).
@@ -114,7 +128,7 @@ class GroupConfig:
 
     size_poisson_rate: float = 1.1
     max_size: int = 5
-    speed_drop_per_member_mps: float = 0.04
+    speed_drop_per_member_mps: float = 0.02
     formation_spacing_m: float = 0.75  # lateral distance between neighbours in the abreast formation
     leave_rate_hz: float = 0.0
     merge_rate_hz: float = 0.0

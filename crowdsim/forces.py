@@ -91,16 +91,22 @@ def wall_acc(pos: np.ndarray, radius: np.ndarray, segments: np.ndarray,
 
 
 def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray, i: np.ndarray,
-              j: np.ndarray, params: GroupForceParams, gaze_label: np.ndarray | None = None) -> np.ndarray:
-    """(N, 2) Moussaïd et al. (2010) group terms: gaze, coherence and intra-group repulsion.
+              j: np.ndarray, params: GroupForceParams, gaze_label: np.ndarray | None = None,
+              v_desired: np.ndarray | None = None) -> np.ndarray:
+    """(N, 2) Moussaïd et al. (2010) group terms: gaze, coherence and intra-group repulsion, plus the catch-up
+    term (`GroupForceParams`): beta1' gamma min(|v|, |v_desired|) along the heading for a member whose others'
+    centre lies gamma rad ahead of abreast, the mirror of the gaze brake.
 
-    label: (N,) dense group labels 0..G-1. gaze_label: (N,) dense labels of the sub-groups whose centre each
-    member looks at (default: the whole group); groups above three walk as sub-groups (Moussaïd et al. 2010),
-    and the front one is not held back by looking round at the one behind. Pairs (i, j) from the spatial index
-    are reused for the repulsion between members closer than d0. Singletons receive no group force.
+    label: (N,) dense group labels 0..G-1. v_desired: (N, 2) m/s desired velocities (default: vel); a member
+    standing at its place (desired speed ~0) or stuck (speed ~0) is not pushed. gaze_label: (N,) dense labels of
+    the sub-groups whose centre each member looks at (default: the whole group); groups above three walk as
+    sub-groups (Moussaïd et al. 2010), and the front one is not held back by looking round at the one behind.
+    Pairs (i, j) from the spatial index are reused for the repulsion between members closer than d0. Singletons
+    receive no group force.
     """
     n = len(pos)
     gaze_label = label if gaze_label is None else gaze_label
+    v_desired = vel if v_desired is None else v_desired
     n_groups = int(label.max()) + 1 if n else 0
     size = np.bincount(label, minlength=n_groups)[label].astype(float)
     in_group = size > 1
@@ -111,10 +117,16 @@ def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray
     sub = np.bincount(gaze_label, minlength=n_sub)[gaze_label].astype(float)
     sub_centre = scatter_add(n_sub, gaze_label, pos)[gaze_label] / sub[:, None]
     others = (sub_centre * sub[:, None] - pos) / np.maximum(sub - 1.0, 1.0)[:, None]
-    to_others, _ = unit(others - pos)
+    to_others, dist_others = unit(others - pos)
     angle = np.arccos(np.clip(np.einsum("nk,nk->n", e, to_others), -1.0, 1.0))
-    alpha = np.maximum(angle - np.deg2rad(params.vision_half_angle_deg), 0.0)
-    acc = -params.gaze_strength * (alpha * (in_group & (sub > 1)))[:, None] * vel
+    half = np.deg2rad(params.vision_half_angle_deg)
+    alpha = np.maximum(angle - half, 0.0)
+    behind = np.maximum(np.pi - half - angle, 0.0)  # how far the others are ahead of abreast (rad)
+    fade = np.minimum(dist_others / params.gaze_fade_m, 1.0)  # the direction to a point at one's feet is moot
+    looking = fade * (in_group & (sub > 1))
+    speed = np.minimum(np.sqrt(np.einsum("nk,nk->n", v_desired, v_desired)), np.sqrt(np.einsum("nk,nk->n", vel, vel)))
+    acc = (params.catch_up_strength * behind * speed * looking)[:, None] * e
+    acc -= (params.gaze_strength * alpha * looking)[:, None] * vel
     # Coherence: attraction to the centre of mass once farther than (n - 1) / 2 m (smoothed over 0.25 m).
     to_centre, d_centre = unit(centre - pos)
     q = np.clip((d_centre - 0.5 * (size - 1.0)) / 0.25, 0.0, 1.0) * in_group

@@ -16,12 +16,12 @@ from crowdsim.config import GroupForceParams, SocialForceParams
 
 
 def pack_params(social: SocialForceParams, group: GroupForceParams) -> np.ndarray:
-    """(12,) float64 parameter vector in the order the kernel reads it."""
+    """(14,) float64 parameter vector in the order the kernel reads it."""
     return np.array([
         social.ped_strength_mps2, social.ped_range_m, social.anisotropy, social.relaxation_time_s,
         social.wall_strength_mps2, social.wall_range_m, social.cutoff_m, group.gaze_strength,
         group.coherence_strength_mps2, group.repulsion_strength_mps2, group.repulsion_distance_m,
-        math.radians(group.vision_half_angle_deg),
+        math.radians(group.vision_half_angle_deg), group.catch_up_strength, group.gaze_fade_m,
     ])
 
 
@@ -42,7 +42,7 @@ def _walls(acc, pos, radius, n, walls, aw, bw, cutoff):
 
 
 @numba.njit(cache=True)
-def _groups(acc, pos, vel, e, label, gaze_label, n, i, j, p):
+def _groups(acc, pos, vel, v_des, e, label, gaze_label, n, i, j, p):
     g = label.max() + 1
     sx, sy, cnt = np.zeros(g), np.zeros(g), np.zeros(g)
     gx, gy, gcnt = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -64,9 +64,13 @@ def _groups(acc, pos, vel, e, label, gaze_label, n, i, j, p):
             oy = (gy[gaze_label[k]] - pos[k, 1]) / (gsize - 1.0) - pos[k, 1]
             on = math.sqrt(ox * ox + oy * oy)
             cos = (e[k, 0] * ox + e[k, 1] * oy) / on if on > 1e-9 else 0.0
-            alpha = max(math.acos(min(max(cos, -1.0), 1.0)) - p[11], 0.0)
-            acc[k, 0] -= p[7] * alpha * vel[k, 0]
-            acc[k, 1] -= p[7] * alpha * vel[k, 1]
+            angle = math.acos(min(max(cos, -1.0), 1.0))
+            fade = min(on / p[13], 1.0)
+            brake = p[7] * max(angle - p[11], 0.0) * fade
+            speed = min(math.sqrt(v_des[k, 0] ** 2 + v_des[k, 1] ** 2), math.sqrt(vel[k, 0] ** 2 + vel[k, 1] ** 2))
+            catch = p[12] * max(math.pi - p[11] - angle, 0.0) * fade * speed
+            acc[k, 0] += catch * e[k, 0] - brake * vel[k, 0]
+            acc[k, 1] += catch * e[k, 1] - brake * vel[k, 1]
         tx, ty = cx - pos[k, 0], cy - pos[k, 1]
         dc = math.sqrt(tx * tx + ty * ty)
         if dc > 1e-9:
@@ -117,7 +121,7 @@ def _all(pos, radius, e, i, j, n, vel, v_des, walls, label, gaze_label, p):
         acc[k, 1] += (v_des[k, 1] - vel[k, 1]) / p[3]
     _walls(acc, pos, radius, n, walls, p[4], p[5], p[6])
     if n > 0:
-        _groups(acc, pos, vel, e, label, gaze_label, n, i, j, p)
+        _groups(acc, pos, vel, v_des, e, label, gaze_label, n, i, j, p)
     return acc
 
 

@@ -244,7 +244,7 @@ class CrowdSimulator:
         acc += forces.driving_acc(vel, v_des, cfg.social)
         acc += forces.wall_acc(pos, radius, self.scenario.walls, cfg.social)
         inner = (i < len(idx)) & (j < len(idx))
-        acc += forces.group_acc(pos, vel, e, labels, i[inner], j[inner], cfg.group_forces, gaze)
+        acc += forces.group_acc(pos, vel, e, labels, i[inner], j[inner], cfg.group_forces, gaze, v_des)
         return acc, idx
 
     def _robot_heading(self) -> np.ndarray:

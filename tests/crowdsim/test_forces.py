@@ -78,6 +78,32 @@ def test_coherence_pulls_a_straggler_back_and_gaze_slows_the_leader():
     np.testing.assert_array_equal(alone, 0.0)  # singletons feel no group force
 
 
+def test_catch_up_mirrors_the_gaze_brake_in_a_slanted_pair():
+    """A pair 0.75 m apart, member 1 drawn 0.2 m ahead: the one behind speeds up exactly as much as the one
+    ahead slows down (no coherence inside (n - 1) / 2 m, repulsion is lateral), so the pair keeps its mean speed."""
+    params = GroupForceParams()
+    pos = np.array([[0.0, 0.0], [0.2, 0.72]])
+    vel = np.array([[1.2, 0.0], [1.2, 0.0]])
+    e = np.array([[1.0, 0.0], [1.0, 0.0]])
+    none = np.array([], dtype=int)
+    acc = forces.group_acc(pos, vel, e, np.array([0, 0]), none, none, params, v_desired=vel)
+    assert acc[0, 0] > 0.1 and acc[1, 0] < -0.1
+    assert acc[0, 0] == pytest.approx(-acc[1, 0], rel=1e-9)
+    gaze_only = forces.group_acc(pos, vel, e, np.array([0, 0]), none, none,
+                                 GroupForceParams(catch_up_strength=0.0), v_desired=vel)
+    assert gaze_only[0, 0] == 0.0 and gaze_only[1, 0] == pytest.approx(acc[1, 0])  # Moussaïd's model: only the leader
+
+
+def test_catch_up_does_not_push_a_member_standing_at_its_place():
+    """Standing in an F-formation the desired velocity is ~0: swaying towards the others is not amplified."""
+    pos = np.array([[0.0, 0.0], [0.9, 0.0]])
+    vel = np.array([[0.05, 0.0], [0.0, 0.0]])
+    e = np.array([[1.0, 0.0], [1.0, 0.0]])
+    none = np.array([], dtype=int)
+    acc = forces.group_acc(pos, vel, e, np.array([0, 0]), none, none, GroupForceParams(), v_desired=np.zeros((2, 2)))
+    assert acc[0, 0] <= 0.0
+
+
 def test_group_members_repel_inside_d0():
     params = GroupForceParams()
     pos = np.array([[0.0, 0.0], [0.0, 0.5]])
