@@ -41,12 +41,15 @@ def main(argv: list[str] | None = None) -> int:
                    help="calibrated group threshold scale to record in the meta (default: best.pt's, else none)")
     p.add_argument("--group-mode", choices=THRESHOLD_MODES, default=None, metavar="NAME",
                    help="inference grouping to record in the meta (default: best.pt's, else none: as trained)")
+    p.add_argument("--note", default=None, help="free text recorded in the meta as 'note' (how it was chosen)")
     args = p.parse_args(argv)
     if args.out.suffix != ".safetensors":
         p.error("out must end in .safetensors")
     model, meta = load_model(args.checkpoint, group_threshold_scale=args.group_threshold_scale,
                              group_mode=args.group_mode)
     meta = {**meta, "scene": args.scene}
+    if args.note:
+        meta["note"] = args.note
     if args.data is not None:
         meta["data"] = split_files(args.data)
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -13,6 +13,9 @@
 #   bash scripts/synthetic_pretraining.sh evaluate                  # evaluates every finished run + zero-shot
 #   bash scripts/synthetic_pretraining.sh validate                  # the same runs on the validation splits
 #   bash scripts/synthetic_pretraining.sh report                    # the per-scene table (python)
+#   bash scripts/synthetic_pretraining.sh package                   # ships gpgraph-stgcnn-<scene>-pretrained
+# The runs in RESULTS.md started from the gpgraph-stgcnn-synthetic of commit 438cd77 (trained on crowdsim before
+# the group catch-up term); `git show 438cd77:predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors` gets it.
 # Outputs under OUT (default out/synthetic_pretraining): runs/<variant>-<scene>-s<seed>/, eval/*.json.
 set -euo pipefail
 stage=$1; shift
@@ -80,7 +83,16 @@ case $stage in
   report)
     "$py" scripts/synthetic_pretraining_report.py "$out/eval"
     ;;
+  package)  # pretrainlow (lr 0.001: the leave-one-scene-out choice in `report`), the seed with the best val FDE
+    for scene in $scenes; do
+      seed=$("$py" scripts/synthetic_pretraining_report.py best-seed "$out/val" pretrainlow "$scene")
+      "$py" scripts/package_checkpoint.py "$out/runs/pretrainlow-$scene-s$seed/best.pt" \
+        "predictor/checkpoints/gpgraph-stgcnn-$scene-pretrained.safetensors" --scene "$scene" --data "$data/$scene" \
+        --note "crowdsim-pretrained (gpgraph-stgcnn-synthetic of commit 438cd77), fine-tuned $epochs epochs at lr 0.001 \
+(chosen leave-one-scene-out), seed $seed of 0-2 by validation FDE; RESULTS.md 'What crowdsim pretraining buys'"
+    done
+    ;;
   *)
-    echo "usage: $0 train SEED [SEED ...] | evaluate | validate | report" >&2; exit 2
+    echo "usage: $0 train SEED [SEED ...] | evaluate | validate | report | package" >&2; exit 2
     ;;
 esac

@@ -5,6 +5,12 @@ five-scene average, and a paired comparison of `pretrain` against `real` over ev
 
 Reads `<variant>-<scene>-s<seed>-<protocol>.json` and `zeroshot[avg]-<scene>-<protocol>.json` (gpgraph evaluate).
 The paired test is an exact two-sided sign test on the per-pair FDE difference (no normality assumed).
+With every variant present it also chooses the fine-tuning lr per scene by leave-one-scene-out (the other four
+scenes' test FDE), so that no scene's choice sees its own test data.
+
+    python scripts/synthetic_pretraining_report.py best-seed out/synthetic_pretraining/val pretrainlow eth
+
+prints the seed with the lowest validation FDE (the `validate` stage), which `package` ships.
 """
 
 from __future__ import annotations
@@ -77,13 +83,52 @@ def table(res: dict, protocol: str) -> list[str]:
     return [*lines, ""]
 
 
+def leave_one_scene_out(res: dict, protocol: str, candidates: tuple[str, ...] = ("pretrain", "pretrainlow")) -> list[str]:
+    """Choose the fine-tuning variant for each scene without its test data: the one with the lowest mean test FDE
+    over the other four scenes' splits (every seed). Then the chosen variant against `real` on the scene itself,
+    paired over (scene, seed)."""
+    lines = [f"### Leave-one-scene-out choice of the fine-tuning lr, protocol {protocol}", "",
+             "| scene | " + " | ".join(f"{v}: FDE on the other scenes" for v in candidates)
+             + " | chosen | chosen FDE | real FDE |", "|---" * (len(candidates) + 4) + "|"]
+    diffs = []
+    for scene in SCENES:
+        others = {v: float(np.mean([f for o in SCENES if o != scene for _, f in res[(v, o, protocol)].values()]))
+                  for v in candidates}
+        chosen = min(candidates, key=others.get)
+        picked, real = res[(chosen, scene, protocol)], res[("real", scene, protocol)]
+        diffs += [picked[k][1] - real[k][1] for k in sorted(set(picked) & set(real))]
+        lines.append(f"| {scene} | " + " | ".join(f"{others[v]:.3f}" for v in candidates) + f" | {chosen} | "
+                     f"{np.mean([f for _, f in picked.values()]):.3f} | {np.mean([f for _, f in real.values()]):.3f} |")
+    d = np.array(diffs)
+    return [*lines, "", f"chosen - real FDE over {len(d)} (scene, seed) pairs: mean {d.mean():+.4f} m, chosen better "
+                        f"in {(d < 0).sum()}, worse in {(d > 0).sum()}; sign test p = {sign_test(d):.3g}", ""]
+
+
+def best_seed(val_dir: Path, variant: str, scene: str) -> int:
+    """The seed whose run has the lowest validation FDE (`validate` stage: iid, val split) for (variant, scene)."""
+    scores = {}
+    for path in val_dir.glob(f"{variant}-{scene}-s*-iid.json"):
+        m = NAME.match(path.stem)
+        if m and m.group(1) == variant and m.group(2) == scene:
+            scores[int(m.group(3))] = json.loads(path.read_text())["fde"]
+    if not scores:
+        raise SystemExit(f"no validation results for {variant}-{scene} in {val_dir}")
+    return min(scores, key=scores.get)
+
+
 def main(argv: list[str]) -> int:
+    if len(argv) == 4 and argv[0] == "best-seed":
+        print(best_seed(Path(argv[1]), argv[2], argv[3]))
+        return 0
     if len(argv) != 1 or not Path(argv[0]).is_dir():
-        print("usage: synthetic_pretraining_report.py EVAL_DIR", file=sys.stderr)
+        print("usage: synthetic_pretraining_report.py EVAL_DIR | best-seed VAL_DIR VARIANT SCENE", file=sys.stderr)
         return 2
     res = load(Path(argv[0]))
     for protocol in ("iid", "paper"):
         print("\n".join(table(res, protocol)))
+    if all((v, s, p) in res for v in ("real", "pretrain", "pretrainlow") for s in SCENES for p in ("iid", "paper")):
+        for protocol in ("iid", "paper"):
+            print("\n".join(leave_one_scene_out(res, protocol)))
     return 0
 
 
