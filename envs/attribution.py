@@ -18,6 +18,8 @@ along the line of centres at the step's end.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 STOPPED_MPS = 0.1  # a robot slower than this counts as stopped, m/s
@@ -39,3 +41,32 @@ def collision_kind(robot_pos: np.ndarray, robot_vel: np.ndarray, ped_pos: np.nda
     if float(np.hypot(*robot_vel)) < STOPPED_MPS:
         return "pedestrian"
     return "pedestrian" if robot_closing <= 0.0 and ped_closing > 0.0 else "robot"
+
+
+class SpawnContacts:
+    """Contacts that began as spawns, kept out of the episode when they must not end it
+    (`CrowdNavConfig.spawn_contact_ends_episode` False): such a pedestrian is ignored for contact, discomfort
+    and reward until it is clear of the robot again (positive surface distance), and each such contact is
+    counted once. A pedestrian seen for longer than the spawn window who then touches the robot is an
+    ordinary contact."""
+
+    def __init__(self) -> None:
+        self.ids: set[int] = set()
+        self.count = 0
+
+    def reset(self) -> None:
+        self.ids.clear()
+        self.count = 0
+
+    def filter(self, surface: np.ndarray, ped_ids: np.ndarray, is_new: Callable[[int], bool]) -> np.ndarray:
+        """`surface` (n,) m, surface distances to the pedestrians `ped_ids` (n,), with those in a spawn contact
+        set to +inf. `is_new(k)`: whether the contact with row k began as a spawn (called for contacts only)."""
+        ghost = np.array([int(i) in self.ids for i in ped_ids], bool) if self.ids else np.zeros(len(ped_ids), bool)
+        self.ids -= {int(i) for i in ped_ids[ghost & (surface >= 0.0)]}  # clear again: from now on it counts
+        ghost &= surface < 0.0
+        for k in np.flatnonzero((surface < 0.0) & ~ghost):
+            if is_new(int(k)):
+                self.ids.add(int(ped_ids[k]))
+                self.count += 1
+                ghost[k] = True
+        return np.where(ghost, np.inf, surface)

@@ -122,6 +122,10 @@ class CrowdNavConfig:
     start_clearance_m: surface clearance required around the robot's start when choosing a route, m.
     start_lookahead_s: the start must keep that clearance over this time with every pedestrian's current
         velocity held, so that nobody is already walking into the standing robot (0: now only), s.
+    spawn_contact_ends_episode: whether a contact of kind "spawn" (`envs.attribution`: a replayed track that began
+        on the robot or within one prediction step of reaching it, an annotation artefact no planner can avoid)
+        ends the episode as a collision. False: that pedestrian is ignored for contact, discomfort and reward
+        until it is clear of the robot, and the contact is counted in the metrics (`spawn_contacts`).
     rewards, observation: see their classes.
     replay: an `envs.replay.ReplayConfig` for scenario "replay".
     """
@@ -141,6 +145,7 @@ class CrowdNavConfig:
     group_span_m: float = 3.0
     start_clearance_m: float = 0.5
     start_lookahead_s: float = 2.0
+    spawn_contact_ends_episode: bool = True
     rewards: RewardWeights = field(default_factory=RewardWeights)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     replay: Any = None
@@ -160,6 +165,8 @@ class CrowdNavConfig:
         _positive(self, ("dt_s", "time_limit_s", "goal_tolerance_m", "discomfort_distance_m", "group_span_m"))
         if not 0 <= self.group_space_m < math.inf:
             raise ValueError(f"group_space_m must be finite and >= 0, got {self.group_space_m}")
+        if not isinstance(self.spawn_contact_ends_episode, bool):
+            raise TypeError(f"spawn_contact_ends_episode must be a bool, got {self.spawn_contact_ends_episode!r}")
         for name in ("warmup_s", "start_clearance_m", "start_lookahead_s"):
             if not 0 <= getattr(self, name) < math.inf:
                 raise ValueError(f"{name} must be finite and >= 0, got {getattr(self, name)}")

@@ -23,7 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim import CrowdState
-from envs.attribution import SPAWN_WINDOW_S, collision_kind
+from envs.attribution import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
@@ -103,6 +103,7 @@ class CrowdNavEnv(gym.Env):
         self.history = PedHistory(self.timing.obs_len)
         self._step_start: tuple[np.ndarray, CrowdState] | None = None
         self._nearest_row = -1
+        self._spawns = SpawnContacts()
         self._predictor = None
         self._pred_rng = np.random.default_rng(0)
         self.robot_state = np.zeros(self.dims.state_dim)
@@ -141,6 +142,7 @@ class CrowdNavEnv(gym.Env):
             self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
         self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
         self.metrics = EpisodeMetrics()
+        self._spawns.reset()
         self._done = False
         self._annotations = {}
         self._update_prediction()
@@ -172,6 +174,7 @@ class CrowdNavEnv(gym.Env):
         moved = self.robot_state[:2] - before_pos
         self.metrics.update(cfg.dt_s, math.sqrt(moved.dot(moved)),
                             facts.min_surface_distance_m, cfg.discomfort_distance_m, facts.intruding)
+        self.metrics.spawn_contacts = self._spawns.count
         # 5. terminated, 6. truncated
         terminated = facts.collided or facts.reached_goal
         truncated = (not terminated) and self.steps >= cfg.max_steps
@@ -350,6 +353,9 @@ class CrowdNavEnv(gym.Env):
             rows = np.flatnonzero(s.active)[both]
             swept = swept_distances(before_pos, here, before.pos[rows], s.pos[rows]) - s.radius[rows] - r
             surface[both] = np.minimum(surface[both], swept)
+        if not cfg.spawn_contact_ends_episode and len(surface):
+            rows_of = np.flatnonzero(s.active)
+            surface = self._spawns.filter(surface, p.ped_id, lambda k: self._is_new(int(rows_of[k])))
         min_surface = float(surface.min()) if len(surface) else float("inf")
         self._nearest_row = int(np.flatnonzero(s.active)[np.argmin(surface)]) if len(surface) else -1
         hit_wall = self._walls.within(here, r)
@@ -359,17 +365,22 @@ class CrowdNavEnv(gym.Env):
         return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m, hit_wall, min_surface,
                          intruding)
 
+    def _is_new(self, row: int) -> bool:
+        """Whether the pedestrian in state row `row` is new (`envs.attribution`): its slot held nobody or somebody
+        else at the step's start, or (replays) its track began less than SPAWN_WINDOW_S ago."""
+        before, s = self._step_start[1], self._state
+        if not (before.active[row] and before.ped_id[row] == s.ped_id[row]):
+            return True
+        track_age_s = getattr(self.crowd, "track_age_s", None)
+        return track_age_s is not None and track_age_s(int(s.ped_id[row])) < SPAWN_WINDOW_S - 1e-9
+
     def _collision_kind(self) -> str:
         """The kind of this step's pedestrian contact (`envs.attribution`): the pedestrian nearest along the step
-        (`_facts`), new when its slot held nobody or somebody else at the step's start, or (replays) when its
-        track began less than SPAWN_WINDOW_S ago."""
-        before_pos, before = self._step_start
+        (`_facts`)."""
+        before_pos = self._step_start[0]
         s, here, row = self._state, self.robot_state[:2], self._nearest_row
-        new = not (before.active[row] and before.ped_id[row] == s.ped_id[row])
-        track_age_s = getattr(self.crowd, "track_age_s", None)
-        new = new or (track_age_s is not None and track_age_s(int(s.ped_id[row])) < SPAWN_WINDOW_S - 1e-9)
         robot_vel = (here - before_pos) / self.config.dt_s
-        return collision_kind(here, robot_vel, s.pos[row], s.vel[row], new)
+        return collision_kind(here, robot_vel, s.pos[row], s.vel[row], self._is_new(row))
 
     def _finish(self, facts: StepFacts, truncated: bool) -> None:
         m = self.metrics

@@ -20,6 +20,8 @@ class EpisodeMetrics:
     collision_time_s: time of the collision, s (NaN without one).
     group_intrusion: whether the robot's body overlapped a ground-truth group's region on any step.
     intrusion_fraction: fraction of steps with such an overlap.
+    spawn_contacts: contacts of kind "spawn" that did not end the episode
+        (`CrowdNavConfig.spawn_contact_ends_episode` False; `envs.attribution.SpawnContacts`).
     """
 
     steps: int = 0
@@ -35,6 +37,7 @@ class EpisodeMetrics:
     min_distance_m: float = math.inf
     discomfort_steps: int = 0
     intrusion_steps: int = 0
+    spawn_contacts: int = 0
 
     def update(self, dt_s: float, moved_m: float, min_surface_m: float, comfort_m: float, intruding: bool) -> None:
         self.steps += 1
@@ -68,4 +71,5 @@ class EpisodeMetrics:
             "time_s": self.time_s, "time_to_goal_s": self.time_to_goal_s, "path_length_m": self.path_length_m,
             "min_distance_m": self.min_distance_m, "discomfort_frequency": self.discomfort_frequency,
             "group_intrusion": self.group_intrusion, "intrusion_fraction": self.intrusion_fraction,
+            "spawn_contacts": self.spawn_contacts,
         }

@@ -39,7 +39,8 @@ class EpisodeRecord:
 
     outcome: "success" | "collision" | "timeout" | "error" (the policy raised; `error` has the message).
     collision_with: "pedestrian" | "wall" | None. collision_kind: one of `COLLISION_KINDS` or None.
-    collision_time_s: time of the (first, episode-ending) collision. plans/fallbacks: planner calls and
+    collision_time_s: time of the (first, episode-ending) collision. spawn_contacts: contacts of kind "spawn" that
+    did not end the episode (`CrowdNavConfig.spawn_contact_ends_episode`). plans/fallbacks: planner calls and
     fallbacks; solve_times_ms: every solver call's wall time. fingerprint: identifies the settings the episode
     ran under (suite, cell, policy); records merge only when it agrees.
     """
@@ -59,6 +60,7 @@ class EpisodeRecord:
     discomfort_frequency: float = 0.0
     group_intrusion: bool = False
     intrusion_fraction: float = 0.0
+    spawn_contacts: int = 0
     plans: int = 0
     fallbacks: int = 0
     ret: float = 0.0

@@ -25,7 +25,7 @@ DEFAULT_DATA = Path("../shared/datasets/eth_ucy")
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
               "episodes", "seed0", "note", "scene", "predictor"}
 SIMULATED_SCENE = "synthetic"
-_DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m"}
+_DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m", "spawn_contact_ends_episode"}
 
 
 def suite_names() -> list[str]:

@@ -4,7 +4,7 @@
 # test split, and copy them into predictor/checkpoints/. THREADS torch threads (default 1); see RESULTS.md, section
 # "Default synthetic predictor (gpgraph-stgcnn-synthetic)", for the numbers this produced.
 #
-#   scripts/synthetic_predictor.sh [data|train|evaluate|package|all]    (default: all)
+#   scripts/synthetic_predictor.sh [data|train|evaluate|sweep|package|all]    (default: all)
 #
 # Everything goes under out/synthetic_predictor/ (ignored by git) except the packaged checkpoints.
 set -euo pipefail
@@ -21,6 +21,8 @@ BCE=${BCE:-2.0}  # GP-Graph+S group-loss weight: 2.0 chosen over 1.0 on the vali
 export OMP_NUM_THREADS=$THREADS MKL_NUM_THREADS=$THREADS OPENBLAS_NUM_THREADS=$THREADS NUMBA_NUM_THREADS=1
 
 stage=${1:-all}
+SCALE=${SCALE:-}
+MODE=${MODE:-}
 
 data() {
     # The training preset realistic-v1 (crowdsim/presets.py: each recording's crowd size, geometry, speeds,
@@ -68,13 +70,30 @@ evaluate() {
     done
 }
 
+sweep() {
+    # GP-Graph+S groups by average linkage at SCALE x its learned threshold; the scale is chosen on the validation
+    # split (RESULTS.md "Version 2.1" for the method), then `package` records it (SCALE=... package).
+    mkdir -p "$EVAL"
+    "$VENV/bin/python" scripts/sweep_group_threshold.py --checkpoint "$RUNS/gpgraph-stgcnn-synthetic/best.pt" \
+        --data "$DATA" --split val --protocol iid --seed 0 --trials 3 --group-mode average \
+        --scales 0.8 0.9 1.0 1.05 1.1 1.15 1.2 1.3 1.4 1.5 --json "$EVAL/threshold-sweep-val-average.json"
+}
+
+read_json_key() {  # FILE KEY: print one top-level value of a JSON file
+    "$VENV/bin/python" -c 'import json, sys; print(json.load(open(sys.argv[1]))[sys.argv[2]])' "$1" "$2"
+}
+
 package() {
-    # GP-Graph+S groups by average linkage at 1.15 x its learned threshold, chosen on the validation split
-    # (scripts/sweep_group_threshold.py --group-mode average; RESULTS.md "Version 2.1"); rerun that sweep after
-    # retraining before trusting the scale.
+    # SCALE: the sweep's choice (read from its JSON) unless given; its grouping mode likewise
+    local sweep_json="$EVAL/threshold-sweep-val-average.json"
+    local scale mode
+    scale=$SCALE
+    mode=$MODE
+    if [ -z "$scale" ]; then scale=$(read_json_key "$sweep_json" chosen); fi
+    if [ -z "$mode" ]; then mode=$(read_json_key "$sweep_json" chosen_group_mode); fi
     "$VENV/bin/python" scripts/package_checkpoint.py "$RUNS/gpgraph-stgcnn-synthetic/best.pt" \
         "predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors" --scene synthetic --data "$DATA" \
-        --group-mode average --group-threshold-scale 1.15
+        --group-mode "$mode" --group-threshold-scale "$scale"
     "$VENV/bin/python" scripts/package_checkpoint.py "$RUNS/stgcnn-synthetic/best.pt" \
         "predictor/checkpoints/stgcnn-synthetic.safetensors" --scene synthetic --data "$DATA"
 }
@@ -83,7 +102,8 @@ case $stage in
     data) data ;;
     train) train ;;
     evaluate) evaluate ;;
+    sweep) sweep ;;
     package) package ;;
-    all) data; train; evaluate; package ;;
-    *) echo "usage: $0 [data|train|evaluate|package|all]" >&2; exit 2 ;;
+    all) data; train; evaluate; sweep; package ;;
+    *) echo "usage: $0 [data|train|evaluate|sweep|package|all]" >&2; exit 2 ;;
 esac

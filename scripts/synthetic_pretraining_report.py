@@ -83,7 +83,8 @@ def table(res: dict, protocol: str) -> list[str]:
     return [*lines, ""]
 
 
-def leave_one_scene_out(res: dict, protocol: str, candidates: tuple[str, ...] = ("pretrain", "pretrainlow")) -> list[str]:
+def leave_one_scene_out(res: dict, protocol: str,
+                        candidates: tuple[str, ...] = ("pretrain", "pretrainlow")) -> list[str]:
     """Choose the fine-tuning variant for each scene without its test data: the one with the lowest mean test FDE
     over the other four scenes' splits (every seed). Then the chosen variant against `real` on the scene itself,
     paired over (scene, seed)."""

@@ -84,6 +84,31 @@ def test_env_track_seen_for_a_while_is_not_a_spawn(tmp_path):
     assert m["collision"] and m["collision_kind"] == "pedestrian"
 
 
+def _robot_waits_with_spawns_allowed(tmp_path: Path, track: list[tuple[int, float, float]]) -> dict:
+    far = [(t, 30.0, 30.0) for t in range(60)]
+    env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: track, 2: far}), spawn_contact_ends_episode=False,
+                      time_limit_s=16.0)
+    env.reset(seed=0)
+    place_robot(env, (0.0, 0.0), (-6.0, 0.0))
+    return _stand_still(env)
+
+
+def test_a_spawn_contact_need_not_end_the_episode(tmp_path):
+    # pedestrian 1 appears 0.3 m from the waiting robot at step 20, stands there 1.2 s, then walks off along +y
+    track = [(t, 0.3, 0.0) for t in range(20, 24)] + [(t, 0.3, 0.6 * (t - 23)) for t in range(24, 40)]
+    m = _robot_waits_with_spawns_allowed(tmp_path, track)
+    assert not m["collision"] and m["timeout"] and m["spawn_contacts"] == 1
+    assert m["min_distance_m"] > 0  # the spawn contact is left out of the distances, not just of the outcome
+
+
+def test_after_a_spawn_contact_clears_a_new_contact_counts(tmp_path):
+    # the same spawn, then the pedestrian walks 3 m away and comes back into the (stopped) robot
+    away = [(t, 0.3, 0.6 * (t - 23)) for t in range(24, 29)]
+    back = [(t, 0.3, 3.0 - 0.6 * (t - 28)) for t in range(29, 40)]
+    m = _robot_waits_with_spawns_allowed(tmp_path, [(t, 0.3, 0.0) for t in range(20, 24)] + away + back)
+    assert m["collision"] and m["collision_kind"] == "pedestrian" and m["spawn_contacts"] == 1
+
+
 def test_replay_track_age(tmp_path):
     env = CrowdNavEnv(scenario="replay", replay=_tracks(tmp_path, {1: [(t, 5.0, 0.0) for t in range(10, 40)],
                                                                   2: [(t, 30.0, 30.0) for t in range(40)]}))

@@ -43,7 +43,8 @@ def test_pretrained_beats_real_only_on_the_five_test_scenes(protocol, margin_m):
     fde = {"pretrained": [], "real-only": []}
     for scene in SCENES:
         windows = load_windows(DATA / scene / "test")
-        for kind, name in (("pretrained", f"gpgraph-stgcnn-{scene}-pretrained"), ("real-only", f"gpgraph-stgcnn-{scene}")):
+        pair = (("pretrained", f"gpgraph-stgcnn-{scene}-pretrained"), ("real-only", f"gpgraph-stgcnn-{scene}"))
+        for kind, name in pair:
             model, _ = load_model(name)
             result = evaluate(model, windows, EvalConfig(protocol=protocol, seed=0, trials=1), ade_fde_only=True)
             fde[kind].append(result["fde"])
