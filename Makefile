@@ -45,11 +45,11 @@ bench: setup
 soak: setup
 	$(PY) bench/soak.py
 
-# The planner benchmark behind RESULTS.md ("Planner benchmark"): suite crowdnav-v1 v3 (5 real ETH/UCY replays x 50
+# The planner benchmark behind RESULTS.md ("Planner benchmark"): suite crowdnav-v1 v4 (5 real ETH/UCY replays x 50
 # episodes, 20 synthetic cells x 10), mpc-gpgraph, mpc-cv, mpc-none and social-force, 2 workers. Resumable: rerun
-# to continue a killed run. Prints the leaderboard; files in out/bench-v3. Not run in CI.
+# to continue a killed run. Prints the leaderboard; files in out/bench-v4. Not run in CI.
 benchmark: setup
-	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v3 --data ../shared/datasets/eth_ucy
+	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v4 --data ../shared/datasets/eth_ucy
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
 # (gpgraph-stgcnn-synthetic, stgcnn-synthetic); ~25 min on one CPU core. Not run in CI. See RESULTS.md.

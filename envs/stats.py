@@ -64,7 +64,8 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
 
     Rates (with 95% Wilson intervals) are over completed episodes; `group_intrusion_rate_success` over
     successful ones. Collisions split by kind (`collisions_<kind>`); `avoidable_collision_rate` counts the
-    robot and pedestrian kinds, not tracks that began in contact. Time to goal and path length are over
+    robot and pedestrian kinds, not tracks that began in contact; `spawn_contacts` counts the spawn contacts that
+    did not end their episode (`CrowdNavConfig.spawn_contact_ends_episode` False). Time to goal and path length are over
     successes; min distance is the mean of the per-episode minima (episodes without pedestrians left out);
     solve-time percentiles are over every solver call (None without any); fallback rate = fallbacks / plans.
     """
@@ -87,6 +88,7 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     for kind in COLLISION_KINDS:
         out[f"collisions_{kind}"] = sum(r.collision_kind == kind for r in coll)
     out["wall_collisions"] = sum(r.collision_with == "wall" for r in coll)
+    out["spawn_contacts"] = int(sum(r.spawn_contacts for r in done))  # non-terminal ones (kept out of the episode)
     out["time_to_first_collision_s"] = _mean([r.collision_time_s for r in coll if r.collision_time_s is not None])
     ttg = [r.time_to_goal_s for r in succ if r.time_to_goal_s is not None]
     out["time_to_goal_s"] = _mean(ttg)
