@@ -65,8 +65,11 @@ def stopped(book: GroupBook, labels: np.ndarray) -> np.ndarray:
 
 def update(slots: Slots, book: GroupBook, rng: np.random.Generator, config: SimConfig, scenario: Scenario,
            time_s: float) -> None:
-    """One recording step of behaviours: end stops that are over, part and join at stops, start new stops."""
+    """One recording step of behaviours: strangers keep pace, end stops that are over, part and join at stops,
+    start new stops."""
     cfg = config.behaviour
+    if book.following:
+        keep_pace(slots, book, config)
     for label in list(book.stops):
         _advance_stop(slots, book, config, int(label), time_s)
     if cfg.part_rate_hz > 0 or cfg.join_rate_hz > 0:
@@ -82,6 +85,32 @@ def update(slots: Slots, book: GroupBook, rng: np.random.Generator, config: SimC
 
 def _members(slots: Slots, label: int) -> np.ndarray:
     return np.flatnonzero(slots.active & (slots.label == label))
+
+
+FOLLOW_LOST_M = 3.0  # a stranger whose along-track gap changed by more than this has lost the group
+
+
+def keep_pace(slots: Slots, book: GroupBook, config: SimConfig) -> None:
+    """Strangers who entered beside a group keep pace with it (`BehaviourConfig.stranger_follow_gain_per_s`): the
+    desired speed (m/s) of each one in `book.following` becomes the group's walking speed plus gain x (gap at
+    entry - gap now), the gap being its along-track offset from the group's centre (m), clipped to the desired
+    speed range. It lets go when either has left, the group stops, or the gap has changed by over FOLLOW_LOST_M."""
+    gain, social = config.behaviour.stranger_follow_gain_per_s, config.social
+    for label, (leader, gap0) in list(book.following.items()):
+        me, them = _members(slots, label), _members(slots, leader)
+        if gain == 0 or len(me) != 1 or len(them) == 0 or leader in book.stops or label in book.stops:
+            del book.following[label]
+            continue
+        v = slots.vel[them].mean(axis=0)
+        speed = float(np.hypot(*v))
+        if speed < 0.2:  # the group is (nearly) standing: no walking direction to keep pace along
+            continue
+        gap = float((slots.pos[me[0]] - slots.pos[them].mean(axis=0)) @ (v / speed))
+        if abs(gap - gap0) > FOLLOW_LOST_M:
+            del book.following[label]
+            continue
+        slots.speed[me[0]] = float(np.clip(speed + gain * (gap0 - gap), social.desired_speed_min_mps,
+                                           social.desired_speed_max_mps))
 
 
 def _start_stop(slots: Slots, book: GroupBook, rng: np.random.Generator, config: SimConfig,

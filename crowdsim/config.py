@@ -173,7 +173,13 @@ class BehaviourConfig:
       member of a standing group of 2+ leaves on its own (`part_rate_hz` per member; a new label).
     - Strangers who walk close: an arriving single enters, with probability `stranger_companion_prob`, right
       beside or behind the group that entered last from the same entrance, heading for the same exit at a
-      similar speed, so that distance alone does not reveal who is together.
+      similar speed, so that distance alone does not reveal who is together. It then keeps pace with that group
+      (`stranger_follow_gain_per_s`, 1/s; 0: it walks at its own speed and drifts away): each recording step its
+      desired speed becomes the group's walking speed plus the gain times how far it has fallen behind the
+      along-track gap it entered with, the speed adaptation of a pedestrian following another (Lemercier et al.,
+      "Realistic following behaviors for crowd simulation", Computer Graphics Forum 2012, measured followers
+      matching the leader's speed within about a second). It lets go when the group stops or leaves, or the gap has
+      changed by more than 3 m.
     """
 
     member_speed_std_mps: float = 0.05
@@ -187,10 +193,11 @@ class BehaviourConfig:
     join_distance_m: float = 3.0
     part_rate_hz: float = 0.0
     stranger_companion_prob: float = 0.0
+    stranger_follow_gain_per_s: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("member_speed_std_mps", "member_spacing_std", "stop_rate_hz", "join_rate_hz",
-                     "part_rate_hz", "stop_min_s"):
+                     "part_rate_hz", "stop_min_s", "stranger_follow_gain_per_s"):
             _non_negative(name, getattr(self, name))
         for name in ("stop_mean_s", "fformation_spacing_m", "join_distance_m"):
             _positive(name, getattr(self, name))

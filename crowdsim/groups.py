@@ -127,6 +127,7 @@ class GroupBook:
     entered: dict[int, tuple[float, int]] = field(default_factory=dict)
     stops: dict[int, Any] = field(default_factory=dict)  # label -> behaviours.Stop of a stopping group
     last_spawned: int = -1  # label of the group that entered last
+    following: dict[int, tuple[int, float]] = field(default_factory=dict)  # stranger -> (group, gap at entry m)
     stay_sum_s: np.ndarray = field(init=False)
     stay_count: np.ndarray = field(init=False)
 

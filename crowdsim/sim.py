@@ -388,7 +388,9 @@ class CrowdSimulator:
         if forces.crossed_walls(centre[None], spot[None], self.scenario.walls).any() or not placement_ok(
                 spot[None], radius, *self._occupied(self.slots.active), self.scenario.walls):
             return False
-        self._add_group(spot[None], target[None], radius, speed)
+        label = self._add_group(spot[None], target[None], radius, speed)
+        heading = (target - centre) / max(float(np.linalg.norm(target - centre)), 1e-9)
+        self.book.following[label] = (int(last), float((spot - centre) @ heading))  # `behaviours.keep_pace`
         return True
 
     # ------------------------------------------------------------------------------------------ state
