@@ -101,6 +101,15 @@ def test_a_spawn_contact_need_not_end_the_episode(tmp_path):
     assert m["min_distance_m"] > 0  # the spawn contact is left out of the distances, not just of the outcome
 
 
+def test_sliding_off_and_back_on_is_the_same_spawn_contact(tmp_path):
+    # the spawned pedestrian edges to 0.1 m clear of the robot's surface (under SPAWN_CLEAR_M), touches it again,
+    # then walks off: one encounter, no collision
+    track = ([(t, 0.3, 0.0) for t in range(20, 23)] + [(23, 0.65, 0.0), (24, 0.4, 0.0)]
+             + [(t, 0.4, 0.6 * (t - 24)) for t in range(25, 40)])
+    m = _robot_waits_with_spawns_allowed(tmp_path, track)
+    assert not m["collision"] and m["spawn_contacts"] == 1
+
+
 def test_after_a_spawn_contact_clears_a_new_contact_counts(tmp_path):
     # the same spawn, then the pedestrian walks 3 m away and comes back into the (stopped) robot
     away = [(t, 0.3, 0.6 * (t - 23)) for t in range(24, 29)]
