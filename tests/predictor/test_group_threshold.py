@@ -92,9 +92,9 @@ def test_scale_one_is_the_uncalibrated_model_exactly() -> None:
 
 def test_scale_one_reproduces_the_packaged_synthetic_predictor(synthetic_data: Path) -> None:
     """The packaged file without its calibration (exact grouping, scale 1.0 given explicitly) groups exactly by
-    connected components at the learned threshold, as it was trained; the shipped meta says 1.1."""
+    connected components at the learned threshold, as it was trained; the shipped meta says 1.15."""
     windows = load_windows(synthetic_data / "test")
-    assert load_model("gpgraph-stgcnn-synthetic")[0].group_threshold_scale == 1.1
+    assert load_model("gpgraph-stgcnn-synthetic")[0].group_threshold_scale == 1.15
     default, _ = load_model("gpgraph-stgcnn-synthetic", group_threshold_scale=1.0, group_mode="exact")
     explicit, _ = load_model("gpgraph-stgcnn-synthetic", group_threshold_scale=1.0, group_mode="exact")
     assert default.group_threshold_scale == 1.0
