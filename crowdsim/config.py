@@ -86,14 +86,16 @@ class GroupForceParams:
     centre of mass of the other members; coherence: beta2 towards the group's centre of mass when farther
     than (n - 1) / 2 m; repulsion: beta3 away from each member closer than d0 (centre to centre).
 
-    Catch-up (added here): +beta1' gamma v, gamma (rad) how far the others' centre lies ahead of abreast
-    (90 deg - its angle from the heading, when positive). With beta1' = beta1 a member who has fallen behind
-    speeds up as much as one who has drawn ahead slows down, the symmetric along-track pull of Zanlungo et al.'s
-    group potential (PRE 2014); with the gaze term alone a group is held to its slowest member and brakes on
-    every perturbation, and pairs walked at 0.85 and triples at 0.78 of their desired speed in a sparse plaza
-    against 0.94 for people alone. Both terms fade linearly to zero as the others' centre comes within
-    `gaze_fade_m` of the member (the middle of an abreast triple), where its direction is undefined. The
-    calibration: scripts/calibrate_group_speed.py; the test: tests/crowdsim/test_fundamental_diagram.py.
+    Catch-up (added here): +beta1' gamma min(|v|, |v_desired|) along the heading, gamma = max(pi - half-angle -
+    angle, 0) (rad), the angle being that of the others' centre from the heading: the mirror image of the gaze
+    term's alpha, so with the default 90 deg half-angle gamma is how far the others' centre lies ahead of
+    abreast. With beta1' = beta1 a member who has fallen behind speeds up as much as one who has drawn ahead
+    slows down, the symmetric along-track pull of Zanlungo et al.'s group potential (PRE 2014); with the gaze
+    term alone a group is held to its slowest member and brakes on every perturbation, and pairs walked at 0.85
+    and triples at 0.78 of their desired speed in a sparse plaza against 0.94 for people alone. Both terms fade
+    linearly to zero as the others' centre comes within `gaze_fade_m` of the member (the middle of an abreast
+    triple), where its direction is undefined. The calibration: scripts/calibrate_group_speed.py; the test:
+    tests/crowdsim/test_fundamental_diagram.py.
     """
 
     gaze_strength: float = 4.0  # beta1, 1/s (multiplies alpha [rad] * v [m/s])
