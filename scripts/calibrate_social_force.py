@@ -33,6 +33,7 @@ import numpy as np
 
 from crowdsim.config import GroupConfig, SimConfig, SocialForceParams
 from crowdsim.sim import CrowdSimulator
+from crowdsim.walking import walking_speeds
 
 DENSITIES = (0.5, 1.0, 2.0)  # persons/m^2
 LENGTH_M, WIDTH_M = 20.0, 4.0  # the periodic corridor of the tests
@@ -75,16 +76,7 @@ def plaza_speeds(social: SocialForceParams, seed: int, n: int = PLAZA_PEOPLE,
                  groups: GroupConfig | None = None) -> np.ndarray:
     """|velocity| (m/s) of every active pedestrian at every recorded step, each one's first PLAZA_SKIP left out."""
     config = SimConfig(scenario="plaza", n_pedestrians=n, social=social, groups=groups or GroupConfig())
-    sim = CrowdSimulator(config)
-    sim.reset(seed)
-    first_seen: dict[int, int] = {}
-    out = []
-    for k in range(PLAZA_STEPS):
-        s = sim.step()
-        act = np.flatnonzero(s.active)
-        age = np.array([k - first_seen.setdefault(int(pid), k) for pid in s.ped_id[act]])
-        out.append(np.linalg.norm(s.vel[act[age >= PLAZA_SKIP]], axis=1))
-    return np.concatenate(out)
+    return walking_speeds(config, [seed], PLAZA_STEPS, PLAZA_SKIP).samples
 
 
 @dataclass
