@@ -347,17 +347,17 @@ class CrowdNavEnv(gym.Env):
         here, r = self.robot_state[:2], cfg.robot.radius_m
         centre = np.hypot(*(p.pos - here).T)
         surface = centre - p.radius - r
+        active_rows = np.flatnonzero(s.active)
         # rows keep their pedestrian while it stays: those present at both ends get the closest approach
         both = (before.active & s.active & (before.ped_id == s.ped_id))[s.active]
         if both.any():
-            rows = np.flatnonzero(s.active)[both]
+            rows = active_rows[both]
             swept = swept_distances(before_pos, here, before.pos[rows], s.pos[rows]) - s.radius[rows] - r
             surface[both] = np.minimum(surface[both], swept)
         if not cfg.spawn_contact_ends_episode and len(surface):
-            rows_of = np.flatnonzero(s.active)
-            surface = self._spawns.filter(surface, p.ped_id, lambda k: self._is_new(int(rows_of[k])))
+            surface = self._spawns.filter(surface, p.ped_id, lambda k: self._is_new(int(active_rows[k])))
         min_surface = float(surface.min()) if len(surface) else float("inf")
-        self._nearest_row = int(np.flatnonzero(s.active)[np.argmin(surface)]) if len(surface) else -1
+        self._nearest_row = int(active_rows[np.argmin(surface)]) if len(surface) else -1
         hit_wall = self._walls.within(here, r)
         intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
                                          cfg.group_span_m, centre))
