@@ -124,7 +124,7 @@ def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray
     behind = np.maximum(np.pi - half - angle, 0.0)  # how far the others are ahead of abreast (rad)
     fade = np.minimum(dist_others / params.gaze_fade_m, 1.0)  # the direction to a point at one's feet is moot
     looking = fade * (in_group & (sub > 1))
-    speed = np.minimum(np.sqrt(np.einsum("nk,nk->n", v_desired, v_desired)), np.sqrt(np.einsum("nk,nk->n", vel, vel)))
+    speed = np.minimum(unit(v_desired)[1], unit(vel)[1])
     acc = (params.catch_up_strength * behind * speed * looking)[:, None] * e
     acc -= (params.gaze_strength * alpha * looking)[:, None] * vel
     # Coherence: attraction to the centre of mass once farther than (n - 1) / 2 m (smoothed over 0.25 m).

@@ -24,7 +24,6 @@ import numpy as np
 
 STOPPED_MPS = 0.1  # a robot slower than this counts as stopped, m/s
 SPAWN_WINDOW_S = 0.4  # a replayed track younger than this at contact is a spawn (one prediction step), s
-SPAWN_CLEAR_M = 0.2  # a pedestrian in a spawn contact counts again once this clear of the robot (surface), m
 
 
 def collision_kind(robot_pos: np.ndarray, robot_vel: np.ndarray, ped_pos: np.ndarray, ped_vel: np.ndarray,
@@ -47,12 +46,13 @@ def collision_kind(robot_pos: np.ndarray, robot_vel: np.ndarray, ped_pos: np.nda
 class SpawnContacts:
     """Contacts that began as spawns, kept out of the episode when they must not end it
     (`CrowdNavConfig.spawn_contact_ends_episode` False): such a pedestrian is ignored for contact, discomfort
-    and reward until it is clear of the robot again by SPAWN_CLEAR_M (the env's discomfort distance: without
-    that margin a non-reactive replayed walker who has just slid off the robot's side touches it again a
-    step later, the same encounter), and each such contact is counted once. A pedestrian seen for longer than
-    the spawn window who then touches the robot is an ordinary contact."""
+    and reward until it is clear of the robot again by `clear_m` (m; the env passes its discomfort distance,
+    0.2 m by default: without that margin a non-reactive replayed walker who has just slid off the robot's side
+    touches it again a step later, the same encounter), and each such contact is counted once. A pedestrian
+    seen for longer than the spawn window who then touches the robot is an ordinary contact."""
 
-    def __init__(self) -> None:
+    def __init__(self, clear_m: float) -> None:
+        self.clear_m = clear_m
         self.ids: set[int] = set()
         self.count = 0
 
@@ -64,8 +64,8 @@ class SpawnContacts:
         """`surface` (n,) m, surface distances to the pedestrians `ped_ids` (n,), with those in a spawn contact
         set to +inf. `is_new(k)`: whether the contact with row k began as a spawn (called for contacts only)."""
         ghost = np.array([int(i) in self.ids for i in ped_ids], bool) if self.ids else np.zeros(len(ped_ids), bool)
-        self.ids -= {int(i) for i in ped_ids[ghost & (surface >= SPAWN_CLEAR_M)]}  # from now on it counts
-        ghost &= surface < SPAWN_CLEAR_M
+        self.ids -= {int(i) for i in ped_ids[ghost & (surface >= self.clear_m)]}  # from now on it counts
+        ghost &= surface < self.clear_m
         for k in np.flatnonzero((surface < 0.0) & ~ghost):
             if is_new(int(k)):
                 self.ids.add(int(ped_ids[k]))

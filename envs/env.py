@@ -103,7 +103,7 @@ class CrowdNavEnv(gym.Env):
         self.history = PedHistory(self.timing.obs_len)
         self._step_start: tuple[np.ndarray, CrowdState] | None = None
         self._nearest_row = -1
-        self._spawns = SpawnContacts()
+        self._spawns = SpawnContacts(self.config.discomfort_distance_m)
         self._predictor = None
         self._pred_rng = np.random.default_rng(0)
         self.robot_state = np.zeros(self.dims.state_dim)

@@ -68,7 +68,7 @@ def episode_record(result: Any, policy_name: str, seed: int, cell: str = "", fin
         time_to_goal_s=finite_or_none(m["time_to_goal_s"]), path_length_m=float(m["path_length_m"]),
         min_distance_m=finite_or_none(m["min_distance_m"]), discomfort_frequency=float(m["discomfort_frequency"]),
         group_intrusion=bool(m["group_intrusion"]), intrusion_fraction=float(m["intrusion_fraction"]),
-        spawn_contacts=int(m.get("spawn_contacts", 0)), plans=int(m["plans"]), fallbacks=int(m["fallbacks"]),
+        spawn_contacts=int(m["spawn_contacts"]), plans=int(m["plans"]), fallbacks=int(m["fallbacks"]),
         ret=float(result.ret),
         wall_time_s=float(result.wall_time_s), fingerprint=fingerprint,
         solve_times_ms=tuple(float(t) for t in result.solve_times_ms))

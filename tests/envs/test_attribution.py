@@ -102,8 +102,8 @@ def test_a_spawn_contact_need_not_end_the_episode(tmp_path):
 
 
 def test_sliding_off_and_back_on_is_the_same_spawn_contact(tmp_path):
-    # the spawned pedestrian edges to 0.1 m clear of the robot's surface (under SPAWN_CLEAR_M), touches it again,
-    # then walks off: one encounter, no collision
+    # the spawned pedestrian edges to 0.1 m clear of the robot's surface (under the 0.2 m discomfort distance),
+    # touches it again, then walks off: one encounter, no collision
     track = ([(t, 0.3, 0.0) for t in range(20, 23)] + [(23, 0.65, 0.0), (24, 0.4, 0.0)]
              + [(t, 0.4, 0.6 * (t - 24)) for t in range(25, 40)])
     m = _robot_waits_with_spawns_allowed(tmp_path, track)
