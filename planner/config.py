@@ -164,6 +164,13 @@ class MPCConfig:
 # speed cap and predicted-risk ranking did worse and stay off. Later (uni_examples overlaid 6 times, ~20 people per
 # frame, seeds 1000-1059, `scripts/tune_real_crowds.py --overlay 6`, mpc-gpgraph): shield commitment
 # (shield_hold_weight 0.02 / 0.1) gave 32 / 31 collisions against 24 without it, and stays off (0).
+# 2026-11-25: the 12 nearest pedestrians are constrained instead of 8 (max_peds). In crowds as dense as univ's
+# (uni_examples overlaid 10 times, 30-60 people in view; seeds 1000-1119, mpc-gpgraph) the 8 nearest all stand
+# within a couple of metres and a fast walker closing from further out was left to the shield alone: collisions
+# 48/120 -> 34/120 (discordant 21 vs 7, exact McNemar p = 0.012); 16 gave 15/60 against 16/60 for 12 on seeds
+# 1060-1119 but a plan p95 of 46 ms under load (12: 36 ms). On the tuning suite (`crowdnav-tune`: zara03 and
+# uni_examples as recorded, the dense crowdsim cells at seeds 1000-1019) it changed nothing: 33 vs 31 collisions
+# of 160 (7 vs 5 discordant, p = 0.77). RESULTS.md, "planner benchmark (suite crowdnav-v1, version 4), rerun".
 # Set `robot=` to the env's robot with dataclasses.replace.
 CROWD_MPC = MPCConfig(safety_margin_m=0.3, check_midpoints=False, clearance_growth_mps=0.2, spread_inflation=0.5,
-                      max_clearance_inflation_m=0.5, shield_horizon_s=1.6, shield_margin_m=0.15)
+                      max_clearance_inflation_m=0.5, shield_horizon_s=1.6, shield_margin_m=0.15, max_peds=12)

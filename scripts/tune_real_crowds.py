@@ -1,8 +1,11 @@
 """Tune the crowd MPC among real (replayed ETH/UCY) pedestrians on recordings disjoint from the reported ones.
 
 Runs N episodes per recording for each (policy, MPC variant) on the same seeds, in at most 2 worker processes,
-and prints one row per (recording, policy, variant): success / collision (of which spawn-in: the pedestrian was
-first annotated <= 0.8 s before the collision) / timeout rates and plan-time p50/p95 (ms, every solver call).
+and prints one row per (recording, policy, variant): success / collision (of which kind "spawn", `envs.attribution`)
+/ timeout rates and plan-time p50/p95 (ms, every solver call). Episodes follow the suites' rules: a spawn contact
+does not end the episode (`CrowdNavConfig.spawn_contact_ends_episode` False, as in crowdnav-v1 v4), and each
+collision line names its kind (robot / pedestrian). For the paired, suite-based check on the tuning suite see
+`crowdnav benchmark --suite crowdnav-tune` and `scripts/compare_runs.py`.
 
 A variant is ``NAME`` or ``NAME:field=value,field=value`` where the fields are `MPCConfig` fields applied on top
 of the base settings (``--base env``: the env's `ENV_MPC`; ``--base crowd``: `planner.CROWD_MPC`), e.g.
@@ -115,7 +118,7 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
         from envs.replay import ReplayConfig
         from planner import ConstantVelocityMPC
 
-        cfg = CrowdNavConfig(scenario="replay", time_limit_s=40.0,
+        cfg = CrowdNavConfig(scenario="replay", time_limit_s=40.0, spawn_contact_ends_episode=False,
                              replay=ReplayConfig(path=recording, frame_step_s=0.4, min_remaining_s=40.0))
         env = CrowdNavEnv(cfg)
         mpc_cfg = build_mpc_config(cfg.robot, overrides, base)
@@ -154,7 +157,8 @@ def run_one(task: tuple) -> dict:
     result = run_episode(cfg, pol.name, seed, env=env, policy=pol)
     m = result.metrics
     rec = {"recording": Path(recording).stem, "policy": policy, "variant": variant, "seed": seed,
-           "outcome": m["outcome"], "collision_with": m["collision_with"], "steps": m["steps"],
+           "outcome": m["outcome"], "collision_with": m["collision_with"], "kind": m["collision_kind"],
+           "steps": m["steps"],
            "min_distance_m": m["min_distance_m"], "fallbacks": m["fallbacks"], "times_ms": result.solve_times_ms}
     if m["outcome"] == "collision":
         rec.update(_collision_geometry(env))
@@ -174,7 +178,7 @@ def summarise(records: list[dict]) -> list[dict]:
         n = len(sel)
         rows.append({"recording": rec_name, "policy": policy, "variant": variant, "n": n,
                      **{k: sum(r["outcome"] == k for r in sel) / n for k in ("success", "collision", "timeout")},
-                     "spawn": sum(bool(r.get("spawn")) for r in sel) / n,
+                     "spawn": sum(r.get("kind") == "spawn" for r in sel) / n,
                      "p50_ms": float(np.percentile(times, 50)) if times.size else float("nan"),
                      "p95_ms": float(np.percentile(times, 95)) if times.size else float("nan")})
     return rows
@@ -232,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
         if r["outcome"] == "collision":
             geo = {k: round(r[k], 2) for k in ("robot_speed", "bearing_deg", "ped_speed", "seen_snapshots") if k in r}
             print(f"  collision {r['recording']} {r['policy']} {r['variant']} seed {r['seed']} step {r['steps']} "
-                  f"{r['collision_with']} {geo}")
+                  f"{r['collision_with']} {r['kind']} {geo}")
     print_table(summarise(records), variants)
     if args.json:
         args.json.write_text(json.dumps(records))
