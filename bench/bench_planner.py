@@ -15,17 +15,18 @@ collisions with its members included); goals reached.
 
     python bench/bench_planner.py            # 300 steps per configuration, a few minutes
     python bench/bench_planner.py --quick    # 40 steps per configuration
+    python bench/bench_planner.py --crowd    # the env's planner.CROWD_MPC at max_peds 8 and 12, side by side
 """
 
 from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planner import MPCConfig, MPCPlanner, PedPrediction, step_robot
+from planner import CROWD_MPC, MPCConfig, MPCPlanner, PedPrediction, step_robot
 
 HALL_M = np.array([[-2.0, -5.0], [14.0, 5.0]])  # lower-left, upper-right corners
 GOALS = np.array([[0.0, 0.0], [12.0, 0.0]])
@@ -104,10 +105,11 @@ class Crowd:
                              current=self.pos.copy(), step_s=PRED_DT_S)
 
 
-def run_case(solver: str, n_peds: int, k: int, steps: int, seed: int) -> dict[str, float]:
-    """One closed-loop run; returns the row of the table."""
+def run_case(solver: str, n_peds: int, k: int, steps: int, seed: int,
+             base: MPCConfig | None = None) -> dict[str, float]:
+    """One closed-loop run of ``base`` (default: ``MPCConfig()``) with ``solver`` and K = ``k``; the table row."""
     rng = np.random.default_rng(seed)
-    cfg = MPCConfig(solver=solver, n_modes=k)
+    cfg = replace(base or MPCConfig(), solver=solver, n_modes=k)
     planner = MPCPlanner(cfg)
     crowd = Crowd.make(n_peds, rng)
     state, goal_idx, goals, collisions, intrusions, wall, cpu = np.zeros(5), 1, 0, 0, 0, [], []
@@ -146,13 +148,33 @@ def format_row(r: dict) -> str:
             f"| {r['collisions']} | {r['intrusions']} | {r['goals']} |")
 
 
+def crowd_comparison(steps: int, seed: int) -> None:
+    """planner.CROWD_MPC (shield on) with the 8 and the 12 nearest pedestrians constrained, side by side on the
+    same crowds: plan() CPU p50/p95 and their ratio (12 / 8)."""
+    print(f"CROWD_MPC (fatrop, K = {CROWD_MPC.n_modes}, shield {CROWD_MPC.shield_horizon_s} s), {steps} steps, "
+          f"seed {seed}")
+    print("| peds | max_peds 8: plan() CPU p50 / p95 ms | max_peds 12: plan() CPU p50 / p95 ms | ratio p50 / p95 "
+          "| steps in collision 8 / 12 |")
+    print("|---|---|---|---|---|")
+    for n_peds in (20, 40, 60):
+        a, b = (run_case("fatrop", n_peds, CROWD_MPC.n_modes, steps, seed, replace(CROWD_MPC, max_peds=m))
+                for m in (8, 12))
+        print(f"| {n_peds} | {a['cpu_p50']:.1f} / {a['cpu_p95']:.1f} | {b['cpu_p50']:.1f} / {b['cpu_p95']:.1f} "
+              f"| {b['cpu_p50'] / a['cpu_p50']:.2f} / {b['cpu_p95'] / a['cpu_p95']:.2f} "
+              f"| {a['collisions']} / {b['collisions']} |", flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="40 steps per configuration")
     parser.add_argument("--steps", type=int, default=300, help="closed-loop steps per configuration")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--crowd", action="store_true", help="only the CROWD_MPC max_peds 8 vs 12 comparison")
     args = parser.parse_args(argv)
     steps = 40 if args.quick else args.steps
+    if args.crowd:
+        crowd_comparison(steps, args.seed)
+        return
     cfg = MPCConfig()
     print(f"plan step {cfg.dt_s} s, horizon {cfg.horizon_steps} steps, nearest {cfg.max_peds} pedestrians, "
           f"{cfg.max_groups} group slots, {N_SAMPLES} samples -> K modes")
