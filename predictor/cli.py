@@ -31,7 +31,7 @@ from predictor.data import DataFormatError
 from predictor.device import DEVICES, resolve_device
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.grouping import THRESHOLD_MODES
-from predictor.model import GPGraph, GPGraphConfig, check_group_threshold_scale
+from predictor.model import ASSIGNERS, GPGraph, GPGraphConfig, check_group_threshold_scale
 from predictor.sampling import PROTOCOLS
 from predictor.train import TrainConfig, initial_weights, train
 from predictor.windows import load_windows
@@ -59,7 +59,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.resume and not (Path(args.out) / "last.pt").is_file():
         raise ValueError(f"--resume: nothing to resume, {Path(args.out) / 'last.pt'} does not exist")
     model_cfg = GPGraphConfig.backbone_only(args.backbone) if args.no_groups else GPGraphConfig(
-        backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight)
+        backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight, assigner=args.assigner)
     cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
                       bucket=args.bucket, max_pairs=args.max_pairs,
                       seed=args.seed, eval_every=args.eval_every, init=args.init, model=model_cfg)
@@ -244,6 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="micro-batch budget B * N_max^2 (0: one pass per batch; default: the backbone's)")
     t.add_argument("--bce-weight", type=float, default=0.0, help="GP-Graph+S BCE weight (needs labels)")
     t.add_argument("--rotate", action="store_true", help="random rotation augmentation")
+    t.add_argument("--assigner", choices=ASSIGNERS, default="conv",
+                   help="pair distance D: conv (GP-Graph's F_phi) or pairwise (predictor.pair_assigner)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--max-windows", type=int, default=0, help="use only the first N windows (smoke tests)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")

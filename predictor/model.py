@@ -18,8 +18,10 @@ from torch import Tensor, nn
 
 from predictor import grouping
 from predictor.backbones import Backbone, check_backbone, make_backbone
+from predictor.pair_assigner import PairwiseAssigner
 
 INTEGRATIONS = ("mlp", "mean")
+ASSIGNERS = ("conv", "pairwise")  # GPGraphConfig.assigner: GP-Graph's F_phi, or predictor.pair_assigner
 Tuple3 = tuple[Tensor, Tensor, "Tensor | None"]
 SAMPLE_LEVELS = ("group", "scene", "pedestrian")
 
@@ -36,6 +38,9 @@ class GPGraphConfig:
         threshold_init: initial learnable distance threshold pi, embedding units.
         tau: temperature of the soft assignment sigmoid, embedding units.
         embed_channels: channels of the group embedding F_phi.
+        assigner: how the pair distance D is learned: 'conv' (GP-Graph's F_phi, a linear convolution of each
+            pedestrian's positions) or 'pairwise' (an MLP on rotation-invariant features of each pair's relative
+            motion, ``predictor.pair_assigner``).
         pedestrian_branch, inter_branch, intra_branch: which branches run.
         weight_share: one backbone for all branches (False: one per branch).
         integration: 'mlp' (mean + residual PReLU/linear over the concatenation) or 'mean'.
@@ -49,6 +54,7 @@ class GPGraphConfig:
     threshold_init: float = 1.0
     tau: float = 0.1
     embed_channels: int = 8
+    assigner: str = "conv"
     pedestrian_branch: bool = True
     inter_branch: bool = True
     intra_branch: bool = True
@@ -61,6 +67,8 @@ class GPGraphConfig:
         check_backbone(self.backbone)
         if self.grouping not in grouping.GROUPING_MODES:
             raise ValueError(f"grouping must be one of {grouping.GROUPING_MODES}, got {self.grouping!r}")
+        if self.assigner not in ASSIGNERS:
+            raise ValueError(f"assigner must be one of {ASSIGNERS}, got {self.assigner!r}")
         if self.integration not in INTEGRATIONS:
             raise ValueError(f"integration must be one of {INTEGRATIONS}, got {self.integration!r}")
         if self.sample_level not in SAMPLE_LEVELS:
@@ -184,7 +192,8 @@ class GPGraph(nn.Module):
         n_branches = sum(self.config.branches)
         n_backbones = 1 if self.config.weight_share else n_branches
         self.backbones = nn.ModuleList(make_backbone(self.config.backbone) for _ in range(n_backbones))
-        self.assigner = GroupAssigner(self.config.embed_channels, self.config.threshold_init)
+        self.assigner = GroupAssigner(self.config.embed_channels, self.config.threshold_init) \
+            if self.config.assigner == "conv" else PairwiseAssigner(threshold_init=self.config.threshold_init)
         self.integrator = Integrator(n_branches) if self.config.integration == "mlp" else None
 
     @property
