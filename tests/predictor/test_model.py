@@ -41,10 +41,10 @@ def test_config_rejects_bad_values(kwargs: dict) -> None:
         GPGraphConfig(**kwargs)
 
 
-@pytest.mark.parametrize("backbone", sorted(BACKBONES))
-def test_padding_does_not_change_outputs(backbone: str) -> None:
+@pytest.mark.parametrize(("backbone", "assigner"), [*((b, "conv") for b in sorted(BACKBONES)), ("stgcnn", "pairwise")])
+def test_padding_does_not_change_outputs(backbone: str, assigner: str) -> None:
     torch.manual_seed(0)
-    model = GPGraph(GPGraphConfig(backbone=backbone)).eval()
+    model = GPGraph(GPGraphConfig(backbone=backbone, assigner=assigner)).eval()
     windows = _windows([3, 6, 2])
     with torch.no_grad():
         b = collate(windows)

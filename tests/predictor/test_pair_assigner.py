@@ -105,27 +105,18 @@ def test_config_names_the_assigner_and_old_configs_load_as_gp_graph() -> None:
     assert isinstance(GPGraph(GPGraphConfig(assigner="pairwise")).assigner, PairwiseAssigner)
 
 
-def test_padding_does_not_change_the_pairwise_model(tmp_path) -> None:
+def test_pairwise_model_round_trips_through_a_checkpoint(tmp_path) -> None:
     from predictor.checkpoint import load_model, save_model
 
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
-    windows = []
-    for n in (3, 6, 2):
-        traj = np.cumsum(rng.normal(scale=0.3, size=(20, n, 2)), axis=0)
-        windows.append(Window(traj[:8], traj[8:], np.arange(n), None))
+    traj = np.cumsum(rng.normal(scale=0.3, size=(20, 5, 2)), axis=0)
+    b = collate([Window(traj[:8], traj[8:], np.arange(5), None)])
     model = GPGraph(GPGraphConfig(backbone="stgcnn", assigner="pairwise")).eval()
-    with torch.no_grad():
-        b = collate(windows)
-        joint = model(b.obs_abs, b.obs_rel, b.node_mask)
-        for i, w in enumerate(windows):
-            s = collate([w])
-            alone = model(s.obs_abs, s.obs_rel, s.node_mask)
-            torch.testing.assert_close(joint.raw[i, :, : w.n_peds], alone.raw[0], atol=1e-5, rtol=1e-4)
-            assert torch.equal(joint.groups[i, : w.n_peds], alone.groups[0])
     path = tmp_path / "m.pt"
     save_model(model, path)
     loaded, _ = load_model(str(path))
     assert loaded.config.assigner == "pairwise"
     with torch.no_grad():
-        torch.testing.assert_close(loaded(b.obs_abs, b.obs_rel, b.node_mask).raw, joint.raw)
+        torch.testing.assert_close(loaded(b.obs_abs, b.obs_rel, b.node_mask).raw,
+                                   model(b.obs_abs, b.obs_rel, b.node_mask).raw)
