@@ -18,6 +18,9 @@ EVAL=$ROOT/eval
 THREADS=${THREADS:-1}
 EPOCHS=${EPOCHS:-80}  # validation loss bottoms out by epoch ~30-50 on this much data (RESULTS.md); lr halves at 50
 BCE=${BCE:-2.0}  # GP-Graph+S group-loss weight: 2.0 chosen over 1.0 on the validation split (RESULTS.md)
+# group assigner: conv (GP-Graph's F_phi, the shipped gpgraph-stgcnn-synthetic) or pairwise (the packaged
+# gpgraph-stgcnn-synthetic-pairwise was trained with ASSIGNER=pairwise; RESULTS.md "Pairwise group assigner")
+ASSIGNER=${ASSIGNER:-conv}
 export OMP_NUM_THREADS=$THREADS MKL_NUM_THREADS=$THREADS OPENBLAS_NUM_THREADS=$THREADS NUMBA_NUM_THREADS=1
 
 stage=${1:-all}
@@ -42,7 +45,7 @@ train() {
     mkdir -p "$RUNS"
     local t0=$SECONDS
     "$VENV/bin/gpgraph" train --threads "$THREADS" --data "$DATA" --backbone stgcnn --bce-weight "$BCE" --epochs "$EPOCHS" \
-        --seed 0 --quiet --out "$RUNS/gpgraph-stgcnn-synthetic"
+        --assigner "$ASSIGNER" --seed 0 --quiet --out "$RUNS/gpgraph-stgcnn-synthetic"
     echo "gpgraph-stgcnn-synthetic: $((SECONDS - t0)) s" | tee "$RUNS/wall_time_gpgraph.txt"
     "$VENV/bin/gpgraph" train --threads "$THREADS" --data "$DATA" --backbone stgcnn --no-groups --epochs "$EPOCHS" \
         --seed 0 --quiet --out "$RUNS/stgcnn-synthetic"
