@@ -18,7 +18,7 @@ from pathlib import Path
 from envs.records import EpisodeRecord, read_records
 from envs.stats import PAIRED_EVENTS, paired_comparison
 
-EVENTS = ("collision", "avoidable_collision", "success")
+EVENTS = ("collision", "avoidable_collision", "success", "group_intrusion")
 
 
 def compare(a: list[EpisodeRecord], b: list[EpisodeRecord]) -> list[tuple[str, dict]]:
