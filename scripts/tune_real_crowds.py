@@ -2,8 +2,8 @@
 
 Runs N episodes per recording for each (policy, MPC variant) on the same seeds, in at most 2 worker processes,
 and prints one row per (recording, policy, variant): success / collision (of which kind "spawn", `envs.attribution`)
-/ timeout rates and plan-time p50/p95 (ms, every solver call). Episodes follow the suites' rules: a spawn contact
-does not end the episode (`CrowdNavConfig.spawn_contact_ends_episode` False, as in crowdnav-v1 v4), and each
+/ timeout rates and plan-time p50/p95 (ms, every solver call). Episodes follow the suites' rules (the defaults of
+`crowdnav-tune`, equal to crowdnav-v1's: 40 s, a spawn contact does not end the episode), and each
 collision line names its kind (robot / pedestrian). For the paired, suite-based check on the tuning suite see
 `crowdnav benchmark --suite crowdnav-tune` and `scripts/compare_runs.py`.
 
@@ -34,7 +34,7 @@ import numpy as np
 DATA = Path("/work/shared/datasets/eth_ucy/eth")
 DEFAULT_RECORDINGS = (DATA / "train/crowds_zara03_train.txt", DATA / "train/uni_examples_train.txt")
 POLICIES = ("mpc-gpgraph", "mpc-cv")
-SPAWN_SNAPSHOTS = 2  # a collider seen in at most this many 0.4 s snapshots counts as a spawn-in collision
+TUNING_SUITE = "crowdnav-tune"  # its defaults (the same as crowdnav-v1's) set the episodes' rules
 REPORTED = ("biwi_eth", "biwi_hotel", "students001", "students003", "crowds_zara01", "crowds_zara02")
 
 
@@ -116,10 +116,12 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
         from envs.env import CrowdNavEnv
         from envs.policies import GPGraphPolicy, PlannerPolicy, singleton_prediction
         from envs.replay import ReplayConfig
+        from envs.suite import load_suite
         from planner import ConstantVelocityMPC
 
-        cfg = CrowdNavConfig(scenario="replay", time_limit_s=40.0, spawn_contact_ends_episode=False,
-                             replay=ReplayConfig(path=recording, frame_step_s=0.4, min_remaining_s=40.0))
+        defaults = load_suite(TUNING_SUITE).cells[0].defaults  # the suites' episode rules (time limit, spawns)
+        cfg = CrowdNavConfig(scenario="replay", **defaults, replay=ReplayConfig(
+            path=recording, frame_step_s=0.4, min_remaining_s=float(defaults["time_limit_s"])))
         env = CrowdNavEnv(cfg)
         mpc_cfg = build_mpc_config(cfg.robot, overrides, base)
         if policy == "mpc-gpgraph":
@@ -140,12 +142,9 @@ def _collision_geometry(env) -> dict:
     rel = peds.pos - state[:2]
     i = int(np.argmin(np.linalg.norm(rel, axis=1)))
     bearing = np.degrees(np.arctan2(rel[i, 1], rel[i, 0]) - state[2])
-    # 0.4 s snapshots (of the last 8) that contain the collider: <= SPAWN_SNAPSHOTS means it appeared (was first
-    # annotated) so shortly before the collision that no planner could have reacted ("spawn" collision).
-    seen = env.history.times_seen(peds.ped_id[i])
+    seen = env.history.times_seen(peds.ped_id[i])  # 0.4 s snapshots (of the last 8) that contain the collider
     return {"robot_speed": float(state[3]), "bearing_deg": float((bearing + 180) % 360 - 180),
-            "ped_speed": float(np.linalg.norm(peds.vel[i])), "seen_snapshots": int(seen),
-            "spawn": bool(seen <= SPAWN_SNAPSHOTS)}
+            "ped_speed": float(np.linalg.norm(peds.vel[i])), "seen_snapshots": int(seen)}
 
 
 def run_one(task: tuple) -> dict:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -10,8 +9,6 @@ import pytest
 
 from envs.records import EpisodeRecord, RecordStore
 from envs.suite import load_suite
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def _episodes(cell) -> set[tuple]:
@@ -42,13 +39,6 @@ def test_tuning_suite_uses_the_reported_defaults_and_dense_cells():
     assert {(c.spec["scenario"], c.spec["n_pedestrians"]) for c in tune.cells if not c.is_real} <= dense
 
 
-def _load_script():
-    spec = importlib.util.spec_from_file_location("compare_runs", ROOT / "scripts" / "compare_runs.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def _record(cell: str, seed: int, outcome: str, kind: str | None = None) -> EpisodeRecord:
     return EpisodeRecord(policy="mpc-gpgraph", seed=seed, outcome=outcome, cell=cell,
                          collision_with="pedestrian" if outcome == "collision" else None, collision_kind=kind)
@@ -61,8 +51,8 @@ def _write(path: Path, records: list[EpisodeRecord]) -> Path:
     return path
 
 
-def test_compare_runs_pairs_by_cell_and_seed(tmp_path, capsys):
-    cmp = _load_script()
+def test_compare_runs_pairs_by_cell_and_seed(tmp_path, capsys, load_script):
+    cmp = load_script("compare_runs")
     # run A collides in seeds 0-5 of cell x, run B only in seed 0; cell y only exists in A and is left out
     a = [_record("x", s, "collision" if s < 6 else "success", "robot" if s < 6 else None) for s in range(10)]
     a += [_record("y", 0, "collision", "spawn")]
