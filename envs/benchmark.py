@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from envs.artifacts import artifact_digest
 from envs.atomic import check_writable_dir
 from envs.evaluate import check_setup
 from envs.policies import PolicyConfig
@@ -34,8 +35,11 @@ class BenchmarkPlan:
 
 
 def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig) -> str:
-    """What an episode's record depends on: the suite version, the cell's definition and the policy config."""
-    return fingerprint(suite.name, suite.version, cell.spec, cell.defaults, policy.to_json())
+    """What an episode's record depends on: the suite version, the cell's definition, the policy config and the
+    digest of the weight files it loads (`envs.artifacts`; left out for policies that load none)."""
+    parts = [suite.name, suite.version, cell.spec, cell.defaults, policy.to_json()]
+    digest = artifact_digest(policy)
+    return fingerprint(*parts, digest) if digest is not None else fingerprint(*parts)
 
 
 def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[PolicyConfig], out: Path,

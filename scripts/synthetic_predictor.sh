@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Regenerate the crowdsim training data and retrain the packaged `gpgraph-stgcnn-synthetic` (GP-Graph+S on
-# the STGCNN backbone) and `stgcnn-synthetic` (backbone alone) predictors, evaluate them on the held-out
+# the STGCNN backbone with the pairwise group assigner) and `stgcnn-synthetic` (backbone alone) predictors, evaluate them on the held-out
 # test split, and copy them into predictor/checkpoints/. THREADS torch threads (default 1); see RESULTS.md, section
 # "Default synthetic predictor (gpgraph-stgcnn-synthetic)", for the numbers this produced.
 #
@@ -18,9 +18,14 @@ EVAL=$ROOT/eval
 THREADS=${THREADS:-1}
 EPOCHS=${EPOCHS:-80}  # validation loss bottoms out by epoch ~30-50 on this much data (RESULTS.md); lr halves at 50
 BCE=${BCE:-2.0}  # GP-Graph+S group-loss weight: 2.0 chosen over 1.0 on the validation split (RESULTS.md)
-# group assigner: conv (GP-Graph's F_phi, the shipped gpgraph-stgcnn-synthetic) or pairwise (the packaged
-# gpgraph-stgcnn-synthetic-pairwise was trained with ASSIGNER=pairwise; RESULTS.md "Pairwise group assigner")
-ASSIGNER=${ASSIGNER:-conv}
+# group assigner: pairwise (predictor/pair_assigner.py; the shipped gpgraph-stgcnn-synthetic since 2026-11-25) or
+# conv (GP-Graph's F_phi; `package` then writes gpgraph-stgcnn-synthetic-conv). RESULTS.md "Pairwise group assigner"
+ASSIGNER=${ASSIGNER:-pairwise}
+case $ASSIGNER in
+    pairwise) PACKAGED=gpgraph-stgcnn-synthetic ;;
+    conv) PACKAGED=gpgraph-stgcnn-synthetic-conv ;;
+    *) echo "ASSIGNER must be pairwise or conv, got '$ASSIGNER'" >&2; exit 2 ;;
+esac
 export OMP_NUM_THREADS=$THREADS MKL_NUM_THREADS=$THREADS OPENBLAS_NUM_THREADS=$THREADS NUMBA_NUM_THREADS=1
 
 stage=${1:-all}
@@ -95,7 +100,7 @@ package() {
     if [ -z "$scale" ]; then scale=$(read_json_key "$sweep_json" chosen); fi
     if [ -z "$mode" ]; then mode=$(read_json_key "$sweep_json" chosen_group_mode); fi
     "$VENV/bin/python" scripts/package_checkpoint.py "$RUNS/gpgraph-stgcnn-synthetic/best.pt" \
-        "predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors" --scene synthetic --data "$DATA" \
+        "predictor/checkpoints/$PACKAGED.safetensors" --scene synthetic --data "$DATA" \
         --group-mode "$mode" --group-threshold-scale "$scale"
     "$VENV/bin/python" scripts/package_checkpoint.py "$RUNS/stgcnn-synthetic/best.pt" \
         "predictor/checkpoints/stgcnn-synthetic.safetensors" --scene synthetic --data "$DATA"

@@ -2,10 +2,11 @@
 # What crowdsim pretraining buys on real data (issue 12, item 3): on every ETH/UCY leave-one-scene-out split,
 # GP-Graph-STGCNN trained three ways, with the same budget on the split's real training data:
 #   real      random initial weights, EPOCHS epochs on the split's train set;
-#   pretrain  initial weights from gpgraph-stgcnn-synthetic (GP-Graph+S trained on crowdsim's realistic-v1
-#             preset only, RESULTS.md "Default synthetic predictor"), then the same EPOCHS epochs;
+#   pretrain  initial weights from INIT (default gpgraph-stgcnn-synthetic-conv: GP-Graph+S with GP-Graph's own
+#             group assigner, trained on crowdsim's realistic-v1 preset only, RESULTS.md "Default synthetic
+#             predictor"; the fine-tuned runs use that assigner too), then the same EPOCHS epochs;
 #   pretrainlow  (only with VARIANTS="pretrainlow") the same fine-tuning at lr 0.001 instead of 0.01;
-#   zeroshot  gpgraph-stgcnn-synthetic itself, never trained on real people, grouping as the fine-tuned runs
+#   zeroshot  INIT itself, never trained on real people, grouping as the fine-tuned runs
 #             (connected components); zeroshotavg: the same with its packaged average-linkage grouping.
 # Every run keeps the checkpoint with the lowest validation loss; evaluation is the RESULTS.md protocol (test
 # split, seed 0, 10 trials, iid and paper). One thread per process, JOBS processes at a time.
@@ -14,14 +15,17 @@
 #   bash scripts/synthetic_pretraining.sh validate                  # the same runs on the validation splits
 #   bash scripts/synthetic_pretraining.sh report                    # the per-scene table (python)
 #   bash scripts/synthetic_pretraining.sh package                   # ships gpgraph-stgcnn-<scene>-pretrained
-# The runs in RESULTS.md started from the gpgraph-stgcnn-synthetic of commit 438cd77 (trained on crowdsim before
-# the group catch-up term); `git show 438cd77:predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors` gets it.
+# The runs in RESULTS.md started from the gpgraph-stgcnn-synthetic of commit 438cd77 (the conv assigner, trained on
+# crowdsim before the group catch-up term); `git show 438cd77:predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors`
+# gets it (INIT=PATH to use it).
 # Outputs under OUT (default out/synthetic_pretraining): runs/<variant>-<scene>-s<seed>/, eval/*.json.
 set -euo pipefail
 stage=$1; shift
 out=${OUT:-out/synthetic_pretraining}
 data=${DATA:-../shared/datasets/eth_ucy}
 py=${PY:-.venv/bin/python}
+INIT=${INIT:-gpgraph-stgcnn-synthetic-conv}
+export INIT
 epochs=${EPOCHS:-40}
 jobs=${JOBS:-2}
 scenes=${SCENES:-"eth hotel univ zara1 zara2"}
@@ -31,8 +35,8 @@ mkdir -p "$out/runs" "$out/eval"
 train_one() {  # variant scene seed
   local run="$out/runs/$1-$2-s$3" init=()
   [ -f "$run/done" ] && return 0
-  [ "$1" = pretrain ] && init=(--init gpgraph-stgcnn-synthetic)
-  [ "$1" = pretrainlow ] && init=(--init gpgraph-stgcnn-synthetic --lr 0.001)
+  [ "$1" = pretrain ] && init=(--init "$INIT")
+  [ "$1" = pretrainlow ] && init=(--init "$INIT" --lr 0.001)
   rm -rf "$run"
   "$py" -m predictor.cli train --threads 1 --backbone stgcnn --data "$data/$2" --out "$run" --epochs "$epochs" \
     --seed "$3" --eval-every 0 --quiet "${init[@]}" > "$run.log" 2>&1
@@ -61,8 +65,8 @@ case $stage in
       for scene in $scenes; do for protocol in iid paper; do
         # zero-shot with the grouping the fine-tuned runs use (connected components at the learned threshold);
         # the packaged default (average linkage x 1.15) as its own row
-        echo "gpgraph-stgcnn-synthetic $scene zeroshot-$scene $protocol --group-mode exact --group-threshold-scale 1"
-        echo "gpgraph-stgcnn-synthetic $scene zeroshotavg-$scene $protocol"
+        echo "$INIT $scene zeroshot-$scene $protocol --group-mode exact --group-threshold-scale 1"
+        echo "$INIT $scene zeroshotavg-$scene $protocol"
         for run in "$out"/runs/*-"$scene"-s*/; do
           [ -f "$run/done" ] || continue
           echo "$run/best.pt $scene $(basename "$run") $protocol"

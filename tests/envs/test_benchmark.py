@@ -121,6 +121,35 @@ def test_records_under_other_settings_refuse_to_merge(tmp_path):
         plan_benchmark(suite, suite.cells, POLICIES, tmp_path, recorded=store.read())
 
 
+def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_path):
+    """Retrained weights behind an unchanged predictor name or path change the fingerprint (envs.artifacts)."""
+    import shutil
+
+    from envs.artifacts import artifact_digest, artifact_files
+    from envs.benchmark import episode_fingerprint
+    from predictor.checkpoint import PACKAGE_CHECKPOINTS
+
+    weights = tmp_path / "model.safetensors"
+    shutil.copy(PACKAGE_CHECKPOINTS / "gpgraph-stgcnn-univ.safetensors", weights)
+    suite = parse_suite(TINY)
+    pcfg = PolicyConfig("mpc-gpgraph", predictor=str(weights))
+    assert artifact_files(pcfg) == [weights] and artifact_digest(PolicyConfig("mpc-cv")) is None
+    assert artifact_files(PolicyConfig("mpc-gpgraph"))[0].name == "gpgraph-stgcnn-synthetic.safetensors"
+    cell = suite.cells[0]
+    old = EpisodeRecord(policy="mpc-gpgraph", seed=7, outcome="success", cell=cell.name,
+                        fingerprint=episode_fingerprint(suite, cell, pcfg))
+    plan = plan_benchmark(suite, [cell], [pcfg], tmp_path, recorded=[old])
+    assert len(plan.done) == 1  # the same weights resume
+    weights.write_bytes(weights.read_bytes()[:-8] + bytes(8))  # "retrained": other bytes, same path
+    with pytest.raises(ValueError, match="other settings"):
+        plan_benchmark(suite, [cell], [pcfg], tmp_path, recorded=[old])
+    # policies that load no weights keep the fingerprint they had before digests existed
+    from envs.runner import fingerprint
+    plain = PolicyConfig("random")
+    assert episode_fingerprint(suite, cell, plain) == fingerprint(suite.name, suite.version, cell.spec,
+                                                                  cell.defaults, plain.to_json())
+
+
 def test_record_store_skips_a_partial_line_and_appends_after_it(tmp_path):
     store = RecordStore(tmp_path / RECORDS)
     r = EpisodeRecord(policy="p", seed=1, outcome="collision", cell="c", collision_kind="spawn",

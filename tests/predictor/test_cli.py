@@ -182,6 +182,7 @@ def test_train_init_starts_from_the_checkpoint_and_records_it(synthetic_data: Pa
     from predictor.checkpoint import load_model
 
     out = tmp_path / "ft"
-    assert _train(synthetic_data, out, 1, "--backbone", "stgcnn", "--init", "gpgraph-stgcnn-synthetic") == 0
+    assert _train(synthetic_data, out, 1, "--backbone", "stgcnn", "--assigner", "pairwise",
+                  "--init", "gpgraph-stgcnn-synthetic") == 0
     _, meta = load_model(out / "best.pt")
     assert meta["train"]["init"] == "gpgraph-stgcnn-synthetic"

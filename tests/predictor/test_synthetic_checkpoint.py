@@ -1,11 +1,12 @@
-"""The packaged default predictor `gpgraph-stgcnn-synthetic` (GP-Graph+S on STGCNN, trained on crowdsim's
-`realistic-v1` preset by scripts/synthetic_predictor.sh) on freshly simulated crowds it has never seen.
+"""The packaged default predictor `gpgraph-stgcnn-synthetic` (GP-Graph+S on STGCNN with the pairwise group
+assigner, trained on crowdsim's `realistic-v1` preset by scripts/synthetic_predictor.sh) on freshly simulated
+crowds it has never seen.
 
 It must load by name with no network, forecast better than constant velocity on a crowd from its training
-distribution (a preset plaza), and find the simulator's groups in the default plaza better than trivial
+distribution (a preset plaza), and find the simulator's groups in the default plaza far better than trivial
 groupings (all singletons; a distance threshold at the last observed step). In the default plaza it does not
-beat constant velocity (an expected failure, with the numbers); neither does it beat a threshold on the
-distance over all 8 observed steps by much (RESULTS.md, section "Default synthetic predictor").
+beat constant velocity (an expected failure, with the numbers; RESULTS.md, section "Default synthetic
+predictor").
 """
 
 from __future__ import annotations
@@ -23,18 +24,19 @@ from predictor.windows import Window, load_windows
 NAME = "gpgraph-stgcnn-synthetic"
 SEED = 424242  # training used preset seeds 1000-1035 (no plaza seed near this one)
 DURATION_S = 60.0
-# Floors, with margin below what the shipped checkpoint measured with seed 424242 (version 3: retrained on the
-# simulator with the group catch-up term and strangers who keep pace; grouping: average linkage at 1.15 x the
-# learned threshold, from its meta, chosen on the crowdsim validation split): best-of-20 ADE on the preset plaza
-# 0.540 vs 0.649 m for constant velocity (0.83x); in the default 30-person plaza PW precision/recall 0.88/0.52
-# (version 2: 0.77/0.64), PW F1 0.66 vs 0.55 for the best last-step distance threshold (2 m), G-MITRE F1 0.86
-# vs 0.36 for all singletons; best-of-20 ADE there 0.522 vs 0.474 m (1.10x, the xfail below).
-MAX_ADE_RATIO = 0.97  # best-of-20 ADE of the model / that of constant velocity
-MIN_PW_PRECISION = 0.80
-MIN_PW_RECALL = 0.50
-GMITRE_F1_MARGIN = 0.2  # over all singletons
+# Floors, with margin below what the shipped checkpoint measured with seed 424242 (version 4, 2026-11-25: the
+# pairwise group assigner, average linkage at 1.1 x the learned threshold, from its meta, chosen on the crowdsim
+# validation split): best-of-20 ADE on the preset plaza 0.512 vs 0.645 m for constant velocity (0.79x; version 3,
+# the conv assigner: 0.83x); in the default 30-person plaza PW precision/recall 0.96/0.72 (version 3: 0.88/0.52),
+# PW F1 0.83 vs 0.55 for the best last-step distance threshold (2 m; version 3: 0.66), G-MITRE F1 0.94 vs 0.36 for
+# all singletons; best-of-20 ADE there 0.489 vs 0.473 m (1.03x, the xfail below; version 3: 1.10x).
+MAX_ADE_RATIO = 0.90  # best-of-20 ADE of the model / that of constant velocity, on its training distribution
+MAX_ADE_RATIO_DEFAULT_PLAZA = 0.97  # ... and in the default plaza (xfail)
+MIN_PW_PRECISION = 0.90
+MIN_PW_RECALL = 0.65
+GMITRE_F1_MARGIN = 0.5  # over all singletons
 PROXIMITY_RADII_M = (0.9, 1.0, 1.1, 1.2, 1.3, 1.5, 2.0)  # members spawn 0.75 m apart
-PW_F1_MARGIN_OVER_PROXIMITY = 0.1  # over the best of these radii, chosen in hindsight
+PW_F1_MARGIN_OVER_PROXIMITY = 0.2  # over the best of these radii, chosen in hindsight
 
 
 def _windows(folder, config: SimConfig) -> list[Window]:
@@ -78,6 +80,7 @@ def test_packaged_by_name(model: GPGraphPredictor) -> None:
     assert (PACKAGE_CHECKPOINTS / f"{NAME}.safetensors").is_file()
     cfg = model.model.config
     assert cfg.backbone == "stgcnn" and cfg.uses_groups and cfg.bce_weight > 0  # GP-Graph+S
+    assert cfg.assigner == "pairwise"
 
 
 def test_beats_constant_velocity_best_of_20_on_its_training_distribution(
@@ -87,12 +90,11 @@ def test_beats_constant_velocity_best_of_20_on_its_training_distribution(
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "measured 0.522 vs 0.474 m (1.10x; version 2: 1.22x): in the default plaza (no stops, no strangers) walkers "
-    "are straight enough that constant velocity wins; a model trained with extra default-config recordings got "
-    "1.04x; RESULTS.md, 'Default synthetic predictor'"))
+    "measured 0.489 vs 0.473 m (1.03x; version 3, the conv assigner: 1.10x): in the default plaza (no stops, no "
+    "strangers) walkers are straight enough that constant velocity wins; RESULTS.md, 'Default synthetic predictor'"))
 def test_beats_constant_velocity_best_of_20_in_the_default_plaza(model: GPGraphPredictor, plaza: list[Window]) -> None:
     model_ade, cv_ade = _ade_ratio(model, plaza)
-    assert model_ade < MAX_ADE_RATIO * cv_ade, (model_ade, cv_ade)
+    assert model_ade < MAX_ADE_RATIO_DEFAULT_PLAZA * cv_ade, (model_ade, cv_ade)
 
 
 def _proximity(obs: np.ndarray, radius_m: float) -> np.ndarray:

@@ -88,11 +88,13 @@ def test_init_loads_a_checkpoints_weights_and_refuses_another_architecture() -> 
 
     source, _ = load_model("gpgraph-stgcnn-synthetic")  # GP-Graph+S: bce_weight 2 (a loss weight only)
     torch.manual_seed(123)
-    model = GPGraph(GPGraphConfig(backbone="stgcnn", bce_weight=0.0))
+    model = GPGraph(GPGraphConfig(backbone="stgcnn", bce_weight=0.0, assigner="pairwise"))
     pairs = zip(model.state_dict().values(), source.state_dict().values(), strict=True)
     assert any(not torch.equal(a, b) for a, b in pairs)
     initial_weights(model, "gpgraph-stgcnn-synthetic")
     for (k, a), b in zip(model.state_dict().items(), source.state_dict().values(), strict=True):
         assert torch.equal(a, b), k
     with pytest.raises(ValueError, match="backbone 'stgcnn' \\(init\\) vs 'sgcn'"):
-        initial_weights(GPGraph(GPGraphConfig(backbone="sgcn")), "gpgraph-stgcnn-synthetic")
+        initial_weights(GPGraph(GPGraphConfig(backbone="sgcn", assigner="pairwise")), "gpgraph-stgcnn-synthetic")
+    with pytest.raises(ValueError, match="assigner 'pairwise' \\(init\\) vs 'conv'"):
+        initial_weights(GPGraph(GPGraphConfig(backbone="stgcnn")), "gpgraph-stgcnn-synthetic")
