@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
-
-import numpy as np
 
 from crowdsim.config import GroupConfig, SimConfig
 from crowdsim.generate import BACKENDS, SPLITS, RunSpec, generate, make_dataset
@@ -150,9 +149,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _summary(paths: dict[str, Path]) -> str:
-    rows = np.loadtxt(paths["trajectories"], ndmin=2)
+    """One line on what was written: the row and pedestrian counts from the recording's metadata JSON (written
+    from the same table as the trajectory file, so the file itself need not be parsed again) and the groups."""
+    meta = json.loads(paths["metadata"].read_text())
     groups = [ln for ln in paths["groups"].read_text().splitlines() if ln.strip()]
-    return (f"{len(rows)} rows, {len(np.unique(rows[:, 1])) if len(rows) else 0} pedestrians, "
+    return (f"{meta['rows']} rows, {meta['pedestrians']} pedestrians, "
             f"{len(groups)} groups of 2+ -> {paths['trajectories'].parent}")
 
 

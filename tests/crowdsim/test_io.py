@@ -89,7 +89,11 @@ def test_read_groups_file_rejects_garbage(tmp_path):
 def test_cli_generate_and_dataset_layout(tmp_path, capsys):
     assert main(["generate", "--scenario", "corridor", "--pedestrians", "12", "--duration", "8",
                  "--seed", "2", "--out", str(tmp_path / "one")]) == 0
-    assert (tmp_path / "one" / "corridor_n12_s2.txt").exists()
+    written = np.loadtxt(tmp_path / "one" / "corridor_n12_s2.txt", ndmin=2)
+    groups = (tmp_path / "one" / "corridor_n12_s2.groups.txt").read_text().split("\n")
+    summary = capsys.readouterr().out.strip().splitlines()[-1]  # what the summary line reports is what was written
+    assert summary.startswith(f"{len(written)} rows, {len(np.unique(written[:, 1]))} pedestrians, "
+                              f"{sum(bool(g.strip()) for g in groups)} groups of 2+ -> ")
     assert main(["dataset", "--scenarios", "corridor,circle_crossing", "--seeds-per-scenario", "3",
                  "--pedestrians", "10", "--duration", "8", "--out", str(tmp_path / "ds")]) == 0
     for split in ("train", "val", "test"):
