@@ -85,12 +85,27 @@ def gaze_subgroups(pos: np.ndarray, goal: np.ndarray, label: np.ndarray, max_abr
     # stable sort instead of one scan of all n labels per large group
     by_group = np.argsort(label, kind="stable")
     starts = np.concatenate(([0], np.cumsum(counts)))
-    for g in big:
+    headings = _mean_rows(goal, by_group, starts[big], counts[big]) - _mean_rows(pos, by_group, starts[big],
+                                                                                counts[big])
+    for g, heading in zip(big, headings, strict=True):
         members = by_group[starts[g]:starts[g + 1]]
-        heading = goal[members].mean(axis=0) - pos[members].mean(axis=0)
         order = np.argsort(-(pos[members] @ heading), kind="stable")
         sub[members[order[(len(members) + 1) // 2:]]] += 1
     return dense_rank(sub)
+
+
+def _mean_rows(x: np.ndarray, by_group: np.ndarray, first: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(G, 2) mean of the rows x[by_group[first[g]:first[g] + count[g]]] of each group g: the rows added one after
+    the other in that order and divided by the count, which is what ``x[rows].mean(axis=0)`` computes for up to
+    15 rows (a test checks this); larger groups use ``mean`` itself."""
+    sums = x[by_group[first]].copy()
+    for k in range(1, int(count.max())):
+        more = np.flatnonzero(count > k)
+        sums[more] += x[by_group[first[more] + k]]
+    out = sums / count[:, None]
+    for g in np.flatnonzero(count > 15):
+        out[g] = x[by_group[first[g]:first[g] + count[g]]].mean(axis=0)
+    return out
 
 
 def dense_rank(values: np.ndarray) -> np.ndarray:
