@@ -39,6 +39,19 @@ def test_tuning_suite_uses_the_reported_defaults_and_dense_cells():
     assert {(c.spec["scenario"], c.spec["n_pedestrians"]) for c in tune.cells if not c.is_real} <= dense
 
 
+def test_check_suite_is_the_reported_real_cells_at_other_seeds():
+    """crowdnav-v1-check: the same recordings, rules, predictors and episode counts as crowdnav-v1's real cells,
+    and not one of its episodes."""
+    check, reported = load_suite("crowdnav-v1-check"), load_suite("crowdnav-v1")
+    real = {c.name: c for c in reported.cells if c.is_real}
+    assert {c.name for c in check.cells} == set(real) and all(c.is_real for c in check.cells)
+    for c in check.cells:
+        ref = real[c.name]
+        assert c.spec | {"seed0": 0} == ref.spec | {"seed0": 0} and c.defaults == ref.defaults
+        assert c.predictor == ref.predictor and len(c.seeds) == len(ref.seeds)
+        assert not _episodes(c) & _episodes(ref)
+
+
 def _record(cell: str, seed: int, outcome: str, kind: str | None = None) -> EpisodeRecord:
     return EpisodeRecord(policy="mpc-gpgraph", seed=seed, outcome=outcome, cell=cell,
                          collision_with="pedestrian" if outcome == "collision" else None, collision_kind=kind)
