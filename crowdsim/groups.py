@@ -183,11 +183,6 @@ class GroupBook:
 def placement_ok(candidates: np.ndarray, cand_radius: np.ndarray, others: np.ndarray,
                  other_radius: np.ndarray, walls: np.ndarray, gap_m: float = 0.05) -> bool:
     """Whether discs (n, 2)/(n,) clear each other, existing discs (m, 2)/(m,) and wall segments (S, 2, 2)."""
-    if len(others):  # only discs within reach of the candidates' bounding box can overlap them (same answer)
-        reach = float(cand_radius.max()) + float(other_radius.max()) + gap_m + 1e-6  # + 1 um: rounding
-        lo, hi = candidates.min(axis=0) - reach, candidates.max(axis=0) + reach
-        near = (others[:, 0] >= lo[0]) & (others[:, 0] <= hi[0]) & (others[:, 1] >= lo[1]) & (others[:, 1] <= hi[1])
-        others, other_radius = others[near], other_radius[near]
     allpos = np.concatenate([others, candidates])
     allrad = np.concatenate([other_radius, cand_radius])
     d = np.linalg.norm(candidates[:, None, :] - allpos[None], axis=2)
