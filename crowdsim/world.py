@@ -98,13 +98,15 @@ class PhysicsWorld:
             buf = batch.Buffer()
             batch.get_space_bodies(self.space, batch.BodyFields.BODY_ID, buf)
             ids = np.frombuffer(buf.int_buf(), dtype=np.uint64)
-            known = np.fromiter(self._slot_of_body.keys(), np.uint64, len(self._slot_of_body))
-            slots = np.fromiter(self._slot_of_body.values(), np.int64, len(self._slot_of_body))
-            by_id = np.argsort(known)
-            at = np.minimum(np.searchsorted(known[by_id], ids), max(len(known) - 1, 0))
-            found = (known[by_id][at] == ids) if len(known) else np.zeros(len(ids), bool)
-            # the slot of each body id (-1: the static body, the robot)
-            self._order = np.where(found, slots[by_id][at] if len(known) else -1, -1).astype(np.int64)
+            self._order = np.full(len(ids), -1, np.int64)  # the slot of each body (-1: the static body, the robot)
+            if self._slot_of_body:  # look every id up at once among the pedestrians' (sorted) body ids
+                known = np.fromiter(self._slot_of_body.keys(), np.uint64, len(self._slot_of_body))
+                slots = np.fromiter(self._slot_of_body.values(), np.int64, len(self._slot_of_body))
+                by_id = np.argsort(known)
+                known, slots = known[by_id], slots[by_id]
+                at = np.minimum(np.searchsorted(known, ids), len(known) - 1)
+                found = known[at] == ids
+                self._order[found] = slots[at[found]]
             self._is_ped = self._order >= 0
             self._ped_slots = self._order[self._is_ped]
             self._dirty = False
