@@ -10,31 +10,22 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
+from typing import Any
 
 from envs.plugins import SB3_PREFIX, is_plugin, parse_sb3
 from envs.policies import AGENTS_DIR, DEFAULT_PREDICTOR, POLICIES, PREDICTOR_POLICIES, PolicyConfig
-
-
-def _checkpoint_file(name_or_path: str) -> Path | None:
-    """The file a predictor name or path loads (`predictor.checkpoint.resolve`, without importing torch);
-    None for plug-ins, constant velocity and names that are not files (loading them fails later, clearly)."""
-    import predictor  # the package itself is light: torch loads with its public names' first use
-
-    path = Path(name_or_path)
-    if path.is_file():
-        return path
-    packaged = Path(predictor.__file__).parent / "checkpoints" / f"{name_or_path}.safetensors"
-    return packaged if packaged.is_file() else None
+from predictor.checkpoints import checkpoint_file  # torch-free
 
 
 def artifact_files(cfg: PolicyConfig) -> list[Path]:
     """The weight files `make_policy(cfg)` loads: the predictor's checkpoint (mpc-gpgraph, plug-in policies
-    given a predictor), the packaged agent of a registry agent policy, or the `sb3:` file."""
+    given a predictor), the packaged agent of a registry agent policy, or the `sb3:` file. Names that are no
+    file (constant velocity, a typo) give none here; loading them fails later, with its own message."""
     files: list[Path | None] = []
     predictor = cfg.predictor if cfg.predictor is not None else \
         DEFAULT_PREDICTOR if cfg.name in PREDICTOR_POLICIES else None
     if predictor is not None and not is_plugin(predictor):
-        files.append(_checkpoint_file(predictor))
+        files.append(checkpoint_file(predictor))
     if cfg.name.startswith(SB3_PREFIX):
         files.append(parse_sb3(cfg.name)[1])
     elif cfg.name in POLICIES and (AGENTS_DIR / f"{cfg.name}.zip").is_file():
@@ -51,3 +42,10 @@ def artifact_digest(cfg: PolicyConfig) -> str | None:
     for f in files:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
+
+
+def policy_identity(cfg: PolicyConfig) -> list[Any]:
+    """What identifies a policy in an episode fingerprint: its config (JSON) and, when it loads weight files,
+    their digest (left out otherwise, so the fingerprints of such policies are those made before digests)."""
+    digest = artifact_digest(cfg)
+    return [cfg.to_json()] if digest is None else [cfg.to_json(), digest]

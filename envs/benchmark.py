@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from envs.artifacts import artifact_digest
+from envs.artifacts import policy_identity
 from envs.atomic import check_writable_dir
 from envs.evaluate import check_setup
 from envs.policies import PolicyConfig
@@ -34,12 +34,11 @@ class BenchmarkPlan:
     done: tuple[EpisodeRecord, ...]
 
 
-def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig) -> str:
+def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig, identity: list[Any] | None = None) -> str:
     """What an episode's record depends on: the suite version, the cell's definition, the policy config and the
-    digest of the weight files it loads (`envs.artifacts`; left out for policies that load none)."""
-    parts = [suite.name, suite.version, cell.spec, cell.defaults, policy.to_json()]
-    digest = artifact_digest(policy)
-    return fingerprint(*parts, digest) if digest is not None else fingerprint(*parts)
+    digest of the weight files it loads (`envs.artifacts.policy_identity`, or `identity` when already known)."""
+    return fingerprint(suite.name, suite.version, cell.spec, cell.defaults,
+                       *(policy_identity(policy) if identity is None else identity))
 
 
 def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[PolicyConfig], out: Path,
@@ -50,10 +49,13 @@ def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Polic
     if len(set(names)) != len(names):
         raise ValueError(f"a policy is named twice: {names}")
     existing = {r.key: r for r in recorded}
+    identities: dict[PolicyConfig, list[Any]] = {}  # each policy's weight files are read once, not once per cell
     tasks, todo, done = [], [], []
     for cell in cells:
         for pcfg in (p.for_cell(cell.scene, cell.predictor) for p in policies):
-            fp = episode_fingerprint(suite, cell, pcfg)
+            if pcfg not in identities:
+                identities[pcfg] = policy_identity(pcfg)
+            fp = episode_fingerprint(suite, cell, pcfg, identities[pcfg])
             for seed in cell.seeds:
                 task = EpisodeTask(cell.env_config(seed, data), pcfg, seed, cell=cell.name, fingerprint=fp,
                                    error_dir=str(Path(out) / "errors"))

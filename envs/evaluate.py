@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from envs.artifacts import artifact_digest
+from envs.artifacts import policy_identity
 from envs.atomic import check_writable_dir, write_json_atomic, write_text_atomic
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.policies import PolicyConfig
@@ -90,8 +90,7 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(seed, seed + episodes))
-    digest = artifact_digest(pcfg)  # the weights behind the names (envs.artifacts)
-    fp = fingerprint(config_summary(config), pcfg.to_json(), *([digest] if digest is not None else []))
+    fp = fingerprint(config_summary(config), *policy_identity(pcfg))  # with the weights' digest (envs.artifacts)
     tasks = [EpisodeTask(config, pcfg, s, fingerprint=fp, keep_scene=out is not None and i < draw,
                          rrd_path=str(out / f"{stem}_seed{s}.rrd") if out is not None and i < record else None,
                          error_dir=str(out / "errors") if out is not None else None)

@@ -26,12 +26,12 @@ from safetensors import SafetensorError, safe_open
 from safetensors.torch import save_file
 
 from predictor.backbones import BACKBONES
+from predictor.checkpoints import PACKAGE_CHECKPOINTS, checkpoint_file
 from predictor.model import GPGraph, GPGraphConfig, check_group_mode, check_group_threshold_scale
 
 FORMAT = "predictor.gpgraph/1"
 META_GROUP_THRESHOLD_SCALE = "group_threshold_scale"  # optional meta key, see the module docstring
 META_GROUP_MODE = "group_mode"  # optional meta key, see the module docstring
-PACKAGE_CHECKPOINTS = Path(__file__).parent / "checkpoints"
 
 
 class CheckpointError(ValueError):
@@ -108,12 +108,9 @@ def load_state(model: GPGraph, state: dict, source: str) -> None:
 
 def resolve(name_or_path: str | Path) -> Path:
     """A file path as given, or a packaged checkpoint name such as 'gpgraph-stgcnn-hotel'."""
-    path = Path(name_or_path)
-    if path.is_file():
+    path = checkpoint_file(name_or_path)
+    if path is not None:
         return path
-    packaged = PACKAGE_CHECKPOINTS / f"{name_or_path}.safetensors"
-    if packaged.is_file():
-        return packaged
     found = PACKAGE_CHECKPOINTS.glob("*.safetensors") if PACKAGE_CHECKPOINTS.is_dir() else []
     names = sorted(p.stem for p in found)
     raise CheckpointError(f"no checkpoint file or packaged name {str(name_or_path)!r}; packaged: {names}")
