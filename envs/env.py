@@ -28,7 +28,7 @@ from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
 from envs.geometry import WallIndex, intruded_groups, swept_distances
-from envs.history import PedHistory
+from envs.history import PedHistory, extrapolate_back
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
 from envs.rewards import StepFacts, reward_terms, weighted
@@ -128,11 +128,13 @@ class CrowdNavEnv(gym.Env):
         self.history.clear()
         self.steps = self._sim_steps = 0
         self._state = state
+        self._observe_arrivals()
         self._record_tick()
         tick = cfg.ticks_per_prediction_step
         for _ in range(tick * round(cfg.warmup_s / (tick * cfg.dt_s))):
             self._state = self.crowd.step()
             self._sim_steps += 1
+            self._observe_arrivals()
             if self._sim_steps % tick == 0:
                 self._record_tick()
         start, self.goal = self._choose_route()
@@ -163,6 +165,7 @@ class CrowdNavEnv(gym.Env):
         self._state = self.crowd.step()
         self._sim_steps += 1
         self.steps += 1
+        self._observe_arrivals()
         # 3. observe
         if self.is_planning_tick:
             self._record_tick()
@@ -223,18 +226,29 @@ class CrowdNavEnv(gym.Env):
     def history_window(self) -> np.ndarray:
         """(obs_len = 8, N, 2) m positions of `pedestrians()` 0.4 s apart, the last row being now. On a 0.4 s tick the
         rows are the recorded snapshots; between ticks each row is interpolated linearly between the two
-        snapshots around its time (the newest interval ends at the current positions). A pedestrian seen for
-        less than 2.8 s is padded backwards with its earliest position."""
+        snapshots around its time (the newest interval ends at the current positions). For a pedestrian seen
+        for less than 2.8 s, the rows before its first snapshot (or, if it came after the last tick, before now)
+        run its velocity over its first 0.4 s in view backwards (`envs.history.extrapolate_back`): one who has
+        just come into view is seen walking, not standing (zero velocity only at the instant it appears)."""
         p = self.pedestrians()
-        if self.is_planning_tick:
-            return self.history.window(p.ped_id)
         tick = self.config.ticks_per_prediction_step
         w = (self._sim_steps % tick) / tick  # fraction of a 0.4 s step since the last snapshot
-        snaps = self.history.window(p.ped_id, current=p.pos)
-        out = np.empty_like(snaps)
-        out[:-1] = (1.0 - w) * snaps[:-1] + w * snaps[1:]
-        out[-1] = p.pos
-        return out
+        if w == 0.0:
+            out = snaps = self.history.window(p.ped_id)
+        else:
+            snaps = self.history.window(p.ped_id, current=p.pos)
+            out = np.empty_like(snaps)
+            out[:-1] = (1.0 - w) * snaps[:-1] + w * snaps[1:]
+            out[-1] = p.pos
+        first = self.history.first_rows(p.ped_id)
+        seen = first < len(out)  # in a snapshot (else only now: the current position stands in)
+        if seen.all() and not first.any():
+            return out  # everyone seen for the whole window
+        anchor_row = np.where(seen, first, len(out) - 1)
+        anchor_pos = np.where(seen[:, None], snaps[np.minimum(first, len(out) - 1), np.arange(len(first))], p.pos)
+        lag = np.where(seen, w * self.timing.step_s, 0.0)
+        return extrapolate_back(out, anchor_row, anchor_pos, lag, self.history.early_velocity(p.ped_id),
+                                self.timing.step_s)
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped
@@ -288,6 +302,10 @@ class CrowdNavEnv(gym.Env):
         )
 
     # ---------------------------------------------------------------------------------- internals
+    def _observe_arrivals(self) -> None:
+        p = self._peds()
+        self.history.observe(self._sim_steps * self.config.dt_s, p.ped_id, p.pos)
+
     def _record_tick(self) -> None:
         p = self._peds()
         self.history.record(p.ped_id, p.pos)

@@ -1,23 +1,48 @@
-"""Pedestrian position history at the predictor's 0.4 s step, keyed by pedestrian identity."""
+"""Pedestrian position history at the predictor's 0.4 s step, keyed by pedestrian identity.
+
+Besides the 0.4 s snapshots, the history notes when each pedestrian was first seen (at the env's control rate)
+and its velocity over its first `EARLY_WINDOW_S` in view. A pedestrian seen for less than the window's 2.8 s
+has no recorded past; `extrapolate_back` fills those rows by running that early velocity backwards, so the
+predictors and the constant-velocity baselines see a walker who has just come into view walking, not standing.
+"""
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
 from envs.timing import DEFAULT_TIMING
 
+EARLY_WINDOW_S = 0.4  # a pedestrian's velocity is measured over its first this-many seconds in view, s
+
+
+@dataclass
+class _Arrival:
+    """When a pedestrian was first seen (time_s, s; pos (2,) m) and its mean velocity since (vel (2,) m/s,
+    fixed once it has been in view for `EARLY_WINDOW_S`)."""
+
+    time_s: float
+    pos: np.ndarray
+    vel: np.ndarray
+
 
 class PedHistory:
-    """The last `length` snapshots (ped ids (n,), positions (n, 2) m), one per 0.4 s tick."""
+    """The last `length` snapshots (ped ids (n,), positions (n, 2) m), one per 0.4 s tick, and each present
+    pedestrian's arrival (`observe`, every control step)."""
 
     def __init__(self, length: int = DEFAULT_TIMING.obs_len) -> None:
         self.length = length
         self._snaps: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=length)
+        self._arrivals: dict[int, _Arrival] = {}
+        self._rows: dict[int, int] = {}  # ped id -> row in the last observed ids
+        self._ids_key = b""
+        self._young: set[int] = set()  # ids still inside their early window
 
     def clear(self) -> None:
         self._snaps.clear()
+        self._arrivals, self._rows, self._ids_key, self._young = {}, {}, b"", set()
 
     def __len__(self) -> int:
         return len(self._snaps)
@@ -31,11 +56,60 @@ class PedHistory:
         order = np.argsort(ped_id, kind="stable")
         self._snaps.append((np.asarray(ped_id)[order].copy(), np.asarray(pos, float)[order].copy()))
 
+    def observe(self, time_s: float, ped_id: np.ndarray, pos: np.ndarray) -> None:
+        """Note the pedestrians in view at time_s (s): ids (n,) int, positions (n, 2) m. Call it at every control
+        step; it costs one comparison when nobody came, left or is inside the early window."""
+        key = np.asarray(ped_id).tobytes()
+        if key == self._ids_key and not self._young:
+            return
+        if key != self._ids_key:
+            self._ids_key = key
+            ids = [int(i) for i in ped_id]
+            self._rows = {i: k for k, i in enumerate(ids)}
+            old, self._arrivals = self._arrivals, {}
+            for k, i in enumerate(ids):
+                arrival = old.get(i)
+                if arrival is None:
+                    arrival = _Arrival(float(time_s), np.array(pos[k], float), np.zeros(2))
+                    self._young.add(i)
+                self._arrivals[i] = arrival
+            self._young &= self._arrivals.keys()
+        for i in list(self._young):
+            arrival = self._arrivals[i]
+            age = time_s - arrival.time_s
+            if age > 0:
+                arrival.vel = (np.asarray(pos[self._rows[i]], float) - arrival.pos) / age
+            if age >= EARLY_WINDOW_S - 1e-9:
+                self._young.discard(i)
+
+    def early_velocity(self, ped_id: np.ndarray) -> np.ndarray:
+        """(n, 2) m/s: each pedestrian's mean velocity over its first `EARLY_WINDOW_S` in view (so far, if it came
+        more recently); zero for one seen at a single instant or never observed."""
+        out = np.zeros((len(ped_id), 2))
+        for k, i in enumerate(np.asarray(ped_id).tolist()):
+            arrival = self._arrivals.get(int(i))
+            if arrival is not None:
+                out[k] = arrival.vel
+        return out
+
+    def first_rows(self, ped_id: np.ndarray) -> np.ndarray:
+        """(n,) int: the oldest row of `window` that holds a snapshot of each pedestrian; `length` for one in no
+        kept snapshot."""
+        ped_id = np.asarray(ped_id)
+        first = np.full(len(ped_id), self.length)
+        row = self.length - 1
+        for ids, _ in reversed(self._snaps):
+            if len(ids):
+                loc = np.minimum(np.searchsorted(ids, ped_id), len(ids) - 1)
+                first[ids[loc] == ped_id] = row
+            row -= 1
+        return first
+
     def window(self, ped_id: np.ndarray, current: np.ndarray | None = None) -> np.ndarray:
         """(length, n, 2) m history of pedestrians ped_id (n,), oldest first; the last row is the newest
         snapshot, which must contain every requested id unless `current` (n, 2) m is given to stand in for
         those missing from it. A pedestrian seen for fewer ticks is padded backwards with its earliest known
-        position (standing still), so the array is always finite."""
+        position (standing still), so the array is always finite (`extrapolate_back` replaces the padding)."""
         if not self._snaps:
             raise RuntimeError("no snapshot recorded yet")
         ped_id = np.asarray(ped_id)
@@ -57,3 +131,16 @@ class PedHistory:
             row -= 1
         out[: row + 1] = out[row + 1]
         return out
+
+
+def extrapolate_back(window: np.ndarray, anchor_row: np.ndarray, anchor_pos: np.ndarray, anchor_lag_s: np.ndarray,
+                     velocity: np.ndarray, step_s: float) -> np.ndarray:
+    """`window` (L, n, 2) m with the rows before each pedestrian's first observation filled at constant velocity.
+
+    Pedestrian i was first observed at anchor_pos[i] (2,) m, at the time of row anchor_row[i] minus
+    anchor_lag_s[i] s; rows r < anchor_row[i] (each `step_s` s apart) become
+    anchor_pos[i] + velocity[i] * ((r - anchor_row[i]) * step_s + anchor_lag_s[i]). velocity (n, 2) m/s."""
+    rows = np.arange(len(window))[:, None]
+    dt = (rows - anchor_row[None]) * step_s + anchor_lag_s[None]  # (L, n) s, relative to the anchor
+    filled = anchor_pos[None] + velocity[None] * dt[..., None]
+    return np.where((rows < anchor_row[None])[..., None], filled, window)

@@ -306,3 +306,52 @@ def test_route_start_is_not_in_the_path_of_a_walker(tmp_path, lookahead_s, expec
     walker = env.pedestrians().pos[env.pedestrians().ped_id == 1][0]
     assert walker == pytest.approx([-2.0, 0.0])
     np.testing.assert_allclose(env.robot_state[:2], expected_start)
+
+
+def test_history_of_a_walker_who_just_came_into_view_is_extrapolated_back(tmp_path):
+    # pedestrian 3 comes into view at frame 11 (1.2 s into the episode) walking at (1.0, 0.5) m/s; before,
+    # the history padded it standing at its first position, so constant velocity and the predictors saw it still
+    path = tmp_path / "arrival.txt"
+    rows = [f"{10 * t}\t1\t20.0\t20.0" for t in range(40)]
+    rows += [f"{10 * t}\t3\t{5.0 + 0.4 * (t - 11)}\t{5.0 + 0.2 * (t - 11)}" for t in range(11, 40)]
+    path.write_text("\n".join(rows) + "\n")
+    env = CrowdNavEnv(CrowdNavConfig(scenario="replay", replay=ReplayConfig(path=path, start_mode="fixed")))
+    env.crowd.robot_route = lambda rng: (np.array([0.0, -5.0]), np.array([10.0, -5.0]))
+    env.reset(seed=0)
+    vel, step_s = np.array([1.0, 0.5]), env.timing.step_s
+    checked = 0
+    for _ in range(30):
+        p = env.pedestrians()
+        if 3 in p.ped_id:
+            k = int(np.flatnonzero(p.ped_id == 3)[0])
+            hist = env.history_window()[:, k]
+            if not env.history.early_velocity(p.ped_id)[k].any():  # the instant it appears: no velocity yet
+                np.testing.assert_allclose(hist, np.repeat(p.pos[k][None], len(hist), 0))
+            else:  # every row on its straight path, rows before it came into view included
+                lags = step_s * np.arange(len(hist) - 1, -1, -1)[:, None]
+                np.testing.assert_allclose(hist, p.pos[k] - lags * vel, atol=1e-9)
+                checked += 1
+            np.testing.assert_array_equal(env.history_window()[:, p.ped_id == 1], 20.0)  # seen throughout
+        env.step(np.zeros(2, np.float32))
+    assert checked >= 12  # both between ticks and on them
+
+
+def test_history_notes_each_arrival_and_its_early_velocity():
+    from envs.history import EARLY_WINDOW_S, PedHistory, extrapolate_back
+
+    hist = PedHistory(length=3)
+    for k in range(8):  # ped 5 arrives at t = 0.2 s walking (2, 0) m/s; at 0.6 s (its window's end) it turns
+        t = 0.1 * k
+        ids = np.array([1, 5]) if k >= 2 else np.array([1])
+        walker = [0.2 * (k - 2), 0.0] if k <= 6 else [0.8, 1.0]
+        hist.observe(t, ids, np.array([[0.0, 0.0], walker][: len(ids)]))
+        v = hist.early_velocity(np.array([5, 1]))
+        np.testing.assert_allclose(v, [[0.0, 0.0] if k <= 2 else [2.0, 0.0], [0.0, 0.0]], atol=1e-12)
+    assert EARLY_WINDOW_S == pytest.approx(0.4)
+    hist.observe(0.8, np.array([1]), np.zeros((1, 2)))  # ped 5 leaves: forgotten
+    assert not hist.early_velocity(np.array([5])).any()
+    window = np.zeros((4, 2, 2))
+    filled = extrapolate_back(window, np.array([2, 0]), np.array([[1.0, 1.0], [0.0, 0.0]]), np.array([0.1, 0.0]),
+                              np.array([[1.0, 0.0], [5.0, 5.0]]), 0.4)
+    np.testing.assert_allclose(filled[:, 0], [[0.3, 1.0], [0.7, 1.0], [0.0, 0.0], [0.0, 0.0]])  # rows 0-1 filled
+    np.testing.assert_array_equal(filled[:, 1], 0.0)  # first seen in row 0: nothing to fill
