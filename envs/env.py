@@ -28,7 +28,7 @@ from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
 from envs.geometry import WallIndex, intruded_groups, swept_distances
-from envs.history import PedHistory, extrapolate_back
+from envs.history import PedHistory
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
 from envs.rewards import StepFacts, reward_terms, weighted
@@ -232,23 +232,7 @@ class CrowdNavEnv(gym.Env):
         just come into view is seen walking, not standing (zero velocity only at the instant it appears)."""
         p = self.pedestrians()
         tick = self.config.ticks_per_prediction_step
-        w = (self._sim_steps % tick) / tick  # fraction of a 0.4 s step since the last snapshot
-        if w == 0.0:
-            out = snaps = self.history.window(p.ped_id)
-        else:
-            snaps = self.history.window(p.ped_id, current=p.pos)
-            out = np.empty_like(snaps)
-            out[:-1] = (1.0 - w) * snaps[:-1] + w * snaps[1:]
-            out[-1] = p.pos
-        first = self.history.first_rows(p.ped_id)
-        seen = first < len(out)  # in a snapshot (else only now: the current position stands in)
-        if seen.all() and not first.any():
-            return out  # everyone seen for the whole window
-        anchor_row = np.where(seen, first, len(out) - 1)
-        anchor_pos = np.where(seen[:, None], snaps[np.minimum(first, len(out) - 1), np.arange(len(first))], p.pos)
-        lag = np.where(seen, w * self.timing.step_s, 0.0)
-        return extrapolate_back(out, anchor_row, anchor_pos, lag, self.history.early_velocity(p.ped_id),
-                                self.timing.step_s)
+        return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s)
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped

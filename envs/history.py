@@ -105,6 +105,28 @@ class PedHistory:
             row -= 1
         return first
 
+    def window_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, step_s: float) -> np.ndarray:
+        """(length, n, 2) m history of pedestrians ped_id (n,) now at pos (n, 2) m, `frac` (in [0, 1)) of a step_s
+        snapshot interval after the newest snapshot, rows step_s apart and the last one now. Off the tick each
+        row is interpolated between the two snapshots around its time; the rows before a pedestrian's first
+        observation (its first snapshot, or now if it came after the newest one) are extrapolated back at its
+        early velocity (`extrapolate_back`)."""
+        if frac == 0.0:
+            out = snaps = self.window(ped_id)
+        else:
+            snaps = self.window(ped_id, current=pos)
+            out = np.empty_like(snaps)
+            out[:-1] = (1.0 - frac) * snaps[:-1] + frac * snaps[1:]
+            out[-1] = pos
+        first = self.first_rows(ped_id)
+        seen = first < len(out)  # in a snapshot (else only now: the current position stands in)
+        if seen.all() and not first.any():
+            return out  # everyone seen for the whole window
+        anchor_row = np.where(seen, first, len(out) - 1)
+        anchor_pos = np.where(seen[:, None], snaps[np.minimum(first, len(out) - 1), np.arange(len(first))], pos)
+        lag = np.where(seen, frac * step_s, 0.0)
+        return extrapolate_back(out, anchor_row, anchor_pos, lag, self.early_velocity(ped_id), step_s)
+
     def window(self, ped_id: np.ndarray, current: np.ndarray | None = None) -> np.ndarray:
         """(length, n, 2) m history of pedestrians ped_id (n,), oldest first; the last row is the newest
         snapshot, which must contain every requested id unless `current` (n, 2) m is given to stand in for
