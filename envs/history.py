@@ -92,33 +92,18 @@ class PedHistory:
                 out[k] = arrival.vel
         return out
 
-    def first_rows(self, ped_id: np.ndarray) -> np.ndarray:
-        """(n,) int: the oldest row of `window` that holds a snapshot of each pedestrian; `length` for one in no
-        kept snapshot."""
-        ped_id = np.asarray(ped_id)
-        first = np.full(len(ped_id), self.length)
-        row = self.length - 1
-        for ids, _ in reversed(self._snaps):
-            if len(ids):
-                loc = np.minimum(np.searchsorted(ids, ped_id), len(ids) - 1)
-                first[ids[loc] == ped_id] = row
-            row -= 1
-        return first
-
     def window_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, step_s: float) -> np.ndarray:
         """(length, n, 2) m history of pedestrians ped_id (n,) now at pos (n, 2) m, `frac` (in [0, 1)) of a step_s
         snapshot interval after the newest snapshot, rows step_s apart and the last one now. Off the tick each
         row is interpolated between the two snapshots around its time; the rows before a pedestrian's first
         observation (its first snapshot, or now if it came after the newest one) are extrapolated back at its
         early velocity (`extrapolate_back`)."""
-        if frac == 0.0:
-            out = snaps = self.window(ped_id)
-        else:
-            snaps = self.window(ped_id, current=pos)
+        snaps, first = self._window(ped_id, None if frac == 0.0 else pos)
+        out = snaps
+        if frac > 0.0:
             out = np.empty_like(snaps)
             out[:-1] = (1.0 - frac) * snaps[:-1] + frac * snaps[1:]
             out[-1] = pos
-        first = self.first_rows(ped_id)
         seen = first < len(out)  # in a snapshot (else only now: the current position stands in)
         if seen.all() and not first.any():
             return out  # everyone seen for the whole window
@@ -131,11 +116,17 @@ class PedHistory:
         """(length, n, 2) m history of pedestrians ped_id (n,), oldest first; the last row is the newest
         snapshot, which must contain every requested id unless `current` (n, 2) m is given to stand in for
         those missing from it. A pedestrian seen for fewer ticks is padded backwards with its earliest known
-        position (standing still), so the array is always finite (`extrapolate_back` replaces the padding)."""
+        position (standing still), so the array is always finite (`window_now` replaces the padding)."""
+        return self._window(ped_id, current)[0]
+
+    def _window(self, ped_id: np.ndarray, current: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """`window` and, found in the same pass, (n,) int the oldest row holding a snapshot of each pedestrian
+        (`length` for one in no kept snapshot, whose rows are all `current`)."""
         if not self._snaps:
             raise RuntimeError("no snapshot recorded yet")
         ped_id = np.asarray(ped_id)
         out = np.empty((self.length, len(ped_id), 2))
+        first = np.full(len(ped_id), self.length)
         snaps = list(self._snaps)
         row = self.length - 1
         for ids, pos in reversed(snaps):
@@ -150,9 +141,10 @@ class PedHistory:
                     out[row] = pos[loc]
             else:  # not seen at this tick: keep the next newer position
                 out[row] = np.where(found[:, None], pos[loc] if len(ids) else 0.0, out[row + 1])
+            first[found] = row
             row -= 1
         out[: row + 1] = out[row + 1]
-        return out
+        return out, first
 
 
 def extrapolate_back(window: np.ndarray, anchor_row: np.ndarray, anchor_pos: np.ndarray, anchor_lag_s: np.ndarray,
