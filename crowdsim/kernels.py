@@ -12,7 +12,9 @@ import math
 import numba
 import numpy as np
 
+from crowdsim import forces
 from crowdsim.config import GroupForceParams, SocialForceParams
+from crowdsim.fma import fma
 
 
 def pack_params(social: SocialForceParams, group: GroupForceParams) -> np.ndarray:
@@ -166,3 +168,87 @@ def desired_and_heading(pos: np.ndarray, vel: np.ndarray, goal: np.ndarray, spee
     """Compiled `forces.desired_velocity` and `forces.headings` in one call: (v_des, e), each (n, 2)."""
     return _desired_and_heading(np.ascontiguousarray(pos), np.ascontiguousarray(vel), np.ascontiguousarray(goal),
                                 np.ascontiguousarray(speed), float(slowdown_m), float(min_speed_mps))
+
+
+@numba.njit(cache=True)
+def _gaze_subgroups(pos, goal, label, max_abreast):
+    n = label.shape[0]
+    sub = label * 2
+    if n == 0:
+        return sub, True
+    n_groups = label.max() + 1
+    counts = np.zeros(n_groups, np.int64)
+    for k in range(n):
+        counts[label[k]] += 1
+    for g in range(n_groups):
+        size = counts[g]
+        if size <= max_abreast:
+            continue
+        if size > 15:  # numpy's mean switches to pairwise summation: left to the numpy path
+            return sub, False
+        members = np.empty(size, np.int64)
+        m = 0
+        for k in range(n):  # members in increasing index order, as np.flatnonzero(label == g)
+            if label[k] == g:
+                members[m] = k
+                m += 1
+        gx = gy = px = py = 0.0
+        for k in members:  # rows added in order, then divided: what .mean(axis=0) does for up to 15 rows
+            gx += goal[k, 0]
+            gy += goal[k, 1]
+            px += pos[k, 0]
+            py += pos[k, 1]
+        hx, hy = gx / size - px / size, gy / size - py / size
+        neg_proj = np.empty(size)
+        for m in range(size):  # -(pos[members] @ heading), rounded as numpy's matrix-vector product
+            neg_proj[m] = -fma(pos[members[m], 0], hx, pos[members[m], 1] * hy)
+        order = np.argsort(neg_proj, kind="mergesort")
+        for m in range((size + 1) // 2, size):
+            sub[members[order[m]]] += 1
+    present = np.zeros(sub.max() + 1, np.int64)
+    for k in range(n):
+        present[sub[k]] = 1
+    rank = np.cumsum(present) - 1
+    out = np.empty(n, np.int64)
+    for k in range(n):
+        out[k] = rank[sub[k]]
+    return out, True
+
+
+def gaze_subgroups(pos: np.ndarray, goal: np.ndarray, label: np.ndarray, max_abreast: int = 3) -> np.ndarray | None:
+    """Compiled `groups.gaze_subgroups` (same labels bit for bit); None when a group of more than 15 splits,
+    which the numpy function handles."""
+    out, ok = _gaze_subgroups(np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(goal, dtype=float),
+                              np.ascontiguousarray(label, dtype=np.int64), int(max_abreast))
+    return out if ok else None
+
+
+@numba.njit(cache=True)
+def _cap_speed(vel, idx, speed, factor, eps):
+    for k in idx:
+        vx, vy = vel[k, 0], vel[k, 1]
+        norm = math.sqrt(vx * vx + vy * vy)
+        limit = speed[k] * factor
+        if norm > limit:
+            scale = limit / max(norm, eps)
+            vel[k, 0], vel[k, 1] = vx * scale, vy * scale
+
+
+def cap_speed_rows(vel: np.ndarray, idx: np.ndarray, speed: np.ndarray, factor: float) -> None:
+    """In place, ``vel[idx] = forces.cap_speed(vel[idx], speed[idx] * factor)`` (the same values): rows of vel
+    (C, 2) m/s faster than speed (C,) m/s x factor are scaled back onto that limit."""
+    _cap_speed(vel, idx, speed, float(factor), forces._EPS)
+
+
+@numba.njit(cache=True)
+def _any_within(pos, goal, idx, radius):
+    for k in idx:
+        dx, dy = pos[k, 0] - goal[k, 0], pos[k, 1] - goal[k, 1]
+        if math.sqrt(dx * dx + dy * dy) < radius:
+            return True
+    return False
+
+
+def any_within(pos: np.ndarray, goal: np.ndarray, idx: np.ndarray, radius_m: float) -> bool:
+    """Whether some row k of idx has |pos[k] - goal[k]| < radius_m (pos, goal (C, 2) m)."""
+    return bool(_any_within(pos, goal, idx, float(radius_m)))

@@ -269,7 +269,11 @@ class CrowdSimulator:
                 big = bool(len(dense)) and int(np.bincount(dense).max()) > 3
                 self._label_cache = (idx, labels, dense, big)
             # with no group above 3 every group is one sub-group: gaze_subgroups would return `dense` itself
-            gaze = gaze_subgroups(s.pos[idx], s.goal[idx], dense) if big else dense
+            gaze = dense
+            if big:  # the compiled labels, or numpy's when a group of more than 15 splits
+                pos, goal = s.pos[idx], s.goal[idx]
+                gaze = kernels.gaze_subgroups(pos, goal, dense)
+                gaze = gaze_subgroups(pos, goal, dense) if gaze is None else gaze
             self._index_cache = (idx, dense, gaze)
         return self._index_cache
 
@@ -299,7 +303,7 @@ class CrowdSimulator:
             acc += self.rng.normal(0.0, cfg.social.fluctuation_mps2, acc.shape)
         force = np.zeros_like(s.pos)
         force[idx] = acc * cfg.mass_kg
-        s.vel[idx] = forces.cap_speed(s.vel[idx], s.speed[idx] * cfg.social.max_speed_factor)
+        kernels.cap_speed_rows(s.vel, idx, s.speed, cfg.social.max_speed_factor)  # = forces.cap_speed on rows idx
         self.world.write(s.vel, force)
         for k in range(cfg.physics_substeps):
             if k:
@@ -326,10 +330,10 @@ class CrowdSimulator:
         idx = np.flatnonzero(s.active)
         if self.book.stops:  # a group on its way to a stop, or standing, has not arrived anywhere
             idx = idx[~behaviours.stopped(self.book, s.label[idx])]
+        if not kernels.any_within(s.pos, s.goal, idx, scen.exit_radius_m):  # nobody arrived: nothing below acts
+            return
         d = s.pos[idx] - s.goal[idx]
         dist = np.sqrt(np.einsum("ij,ij->i", d, d))  # = np.linalg.norm(d, axis=1), bit for bit
-        if not (dist < scen.exit_radius_m).any():  # nobody arrived: nothing below would act
-            return
         if scen.on_arrival == "remove":
             # a group leaves together: with one member out, those within 2 m of their own exit follow at once
             # (a remnant would otherwise count as a smaller group for a second or two)

@@ -27,8 +27,10 @@ from envs.attribution import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
-from envs.geometry import WallIndex, intruded_groups, swept_distances
+from envs.geometry import WallIndex, intruded_groups
 from envs.history import PedHistory
+from envs.kernels import intruded_groups as fast_intruded_groups
+from envs.kernels import step_distances
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
 from envs.rewards import StepFacts, reward_terms, weighted
@@ -347,22 +349,18 @@ class CrowdNavEnv(gym.Env):
         """Distances, contact and intrusion of the step just simulated (`before`: the crowd at its start)."""
         cfg, p, s = self.config, self._peds(), self._state
         here, r = self.robot_state[:2], cfg.robot.radius_m
-        centre = np.hypot(*(p.pos - here).T)
-        surface = centre - p.radius - r
-        active_rows = np.flatnonzero(s.active)
         # rows keep their pedestrian while it stays: those present at both ends get the closest approach
-        both = (before.active & s.active & (before.ped_id == s.ped_id))[s.active]
-        if both.any():
-            rows = active_rows[both]
-            swept = swept_distances(before_pos, here, before.pos[rows], s.pos[rows]) - s.radius[rows] - r
-            surface[both] = np.minimum(surface[both], swept)
+        centre, surface = step_distances(here, before_pos, s.pos, s.radius, s.active, s.ped_id, before.pos,
+                                         before.active, before.ped_id, r)
+        active_rows = np.flatnonzero(s.active)
         if not cfg.spawn_contact_ends_episode and len(surface):
             surface = self._spawns.filter(surface, p.ped_id, lambda k: self._is_new(int(active_rows[k])))
         min_surface = float(surface.min()) if len(surface) else float("inf")
         self._nearest_row = int(active_rows[np.argmin(surface)]) if len(surface) else -1
         hit_wall = self._walls.within(here, r)
-        intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
-                                         cfg.group_span_m, centre))
+        args = (here, r + cfg.group_space_m, p.pos, p.radius, p.group_id, cfg.group_span_m, centre)
+        groups = fast_intruded_groups(*args)
+        intruding = bool(intruded_groups(*args) if groups is None else groups)
         dist_after = self._goal_distance()
         return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m, hit_wall, min_surface,
                          intruding)

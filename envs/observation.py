@@ -23,6 +23,7 @@ from gymnasium import spaces
 
 from envs.config import CrowdNavConfig
 from envs.geometry import ray_distances
+from envs.kernels import observation_arrays
 from envs.timing import DEFAULT_TIMING
 
 PRED_LEN = DEFAULT_TIMING.pred_len
@@ -55,12 +56,6 @@ def rotation(heading: float) -> np.ndarray:
     return np.array([[c, s], [-s, c]])
 
 
-def dense_in_order(ids: np.ndarray) -> np.ndarray:
-    """Renumber ids (n,) 0..G-1 in order of first appearance."""
-    rank: dict = {}
-    return np.array([rank.setdefault(i, len(rank)) for i in np.asarray(ids).tolist()], np.int64)
-
-
 def _bounds(space: spaces.Dict) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """(low, high) of each Box of an observation space, cached on the space (its Boxes do not change)."""
     cached = getattr(space, "_crowdnav_bounds", None)
@@ -68,15 +63,6 @@ def _bounds(space: spaces.Dict) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         cached = {key: (box.low, box.high) for key, box in space.spaces.items()}
         space._crowdnav_bounds = cached
     return cached
-
-
-def nearest_rows(robot_pos: np.ndarray, pos: np.ndarray, cfg: CrowdNavConfig) -> np.ndarray:
-    """Indices into pos (n, 2) of the observed pedestrians: within the sensor range, nearest first, at most P."""
-    d = pos - robot_pos
-    dist = np.sqrt(np.einsum("ij,ij->i", d, d))  # = np.linalg.norm(d, axis=1), bit for bit
-    order = np.argsort(dist, kind="stable")
-    order = order[dist[order] <= cfg.observation.sensor_range_m]
-    return order[: cfg.observation.max_pedestrians]
 
 
 def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.ndarray, goal: np.ndarray,
@@ -90,32 +76,22 @@ def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.n
     unicycle = cfg.robot.model == "unicycle"
     rot = rotation(float(robot_state[2])) if unicycle else np.eye(2)
     here = robot_state[:2]
-    goal_rel = rot @ (goal - here)
-    robot_vel = robot_state[3:5] if unicycle else robot_state[2:4]
-    robot = np.array([goal_rel[0], goal_rel[1], np.linalg.norm(goal - here), robot_vel[0], robot_vel[1],
-                      cfg.robot.radius_m, time_left])
-    rows = nearest_rows(here, pos, cfg)
-    n = len(rows)
-    peds = np.zeros((p, 5))
-    peds[:n, :2] = (pos[rows] - here) @ rot.T
-    peds[:n, 2:4] = vel[rows] @ rot.T
-    peds[:n, 4] = radius[rows]
-    mask = np.zeros(p)
-    mask[:n] = 1.0
-    groups = np.full(p, -1.0)
-    groups[:n] = dense_in_order(group_id[rows])
+    bounds = _bounds(space)
+    robot, peds, mask, groups, rows = observation_arrays(
+        robot_state, goal, rot, unicycle, cfg.robot.radius_m, time_left, pos, vel, radius, group_id, p,
+        cfg.observation.sensor_range_m, bounds["robot"], bounds["pedestrians"])
     out = {"robot": robot, "pedestrians": peds, "pedestrian_mask": mask, "group_ids": groups}
+    n = len(rows)
     if "predictions" in space.spaces:
         k = cfg.observation.n_prediction_samples
         pred = np.zeros((k, PRED_LEN, p, 2))
         if samples is not None and n:
             pred[:, :, :n] = (samples[:k, :, rows] - here) @ rot.T
-        out["predictions"] = pred
+        out["predictions"] = np.clip(pred, *bounds["predictions"]).astype(np.float32)
     if "walls" in space.spaces:
         r = cfg.observation.wall_rays
         heading = float(robot_state[2]) if unicycle else 0.0
         segs = np.zeros((0, 2, 2)) if walls is None else np.asarray(walls, float).reshape(-1, 2, 2)
-        out["walls"] = ray_distances(here, heading + 2.0 * np.pi * np.arange(r) / r, segs,
-                                     cfg.observation.wall_range_m)
-    bounds = _bounds(space)
-    return {key: np.clip(val, *bounds[key]).astype(np.float32) for key, val in out.items()}
+        rays = ray_distances(here, heading + 2.0 * np.pi * np.arange(r) / r, segs, cfg.observation.wall_range_m)
+        out["walls"] = np.clip(rays, *bounds["walls"]).astype(np.float32)
+    return out
