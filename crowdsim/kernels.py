@@ -12,7 +12,7 @@ import math
 import numba
 import numpy as np
 
-from crowdsim import forces
+from crowdsim import forces, groups
 from crowdsim.config import GroupForceParams, SocialForceParams
 from crowdsim.fma import fma
 
@@ -215,12 +215,12 @@ def _gaze_subgroups(pos, goal, label, max_abreast):
     return out, True
 
 
-def gaze_subgroups(pos: np.ndarray, goal: np.ndarray, label: np.ndarray, max_abreast: int = 3) -> np.ndarray | None:
-    """Compiled `groups.gaze_subgroups` (same labels bit for bit); None when a group of more than 15 splits,
-    which the numpy function handles."""
+def gaze_subgroups(pos: np.ndarray, goal: np.ndarray, label: np.ndarray, max_abreast: int = 3) -> np.ndarray:
+    """`groups.gaze_subgroups` (the same labels bit for bit), compiled; a group of more than 15 that splits goes
+    to the numpy function (numpy's mean sums that many rows pairwise)."""
     out, ok = _gaze_subgroups(np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(goal, dtype=float),
                               np.ascontiguousarray(label, dtype=np.int64), int(max_abreast))
-    return out if ok else None
+    return out if ok else groups.gaze_subgroups(pos, goal, label, max_abreast)
 
 
 @numba.njit(cache=True)

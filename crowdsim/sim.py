@@ -21,7 +21,6 @@ from crowdsim.groups import (
     draw_inflow_size,
     formation_goals,
     formation_offsets,
-    gaze_subgroups,
     group_speed,
     hex_lattice,
     placement_ok,
@@ -269,11 +268,7 @@ class CrowdSimulator:
                 big = bool(len(dense)) and int(np.bincount(dense).max()) > 3
                 self._label_cache = (idx, labels, dense, big)
             # with no group above 3 every group is one sub-group: gaze_subgroups would return `dense` itself
-            gaze = dense
-            if big:  # the compiled labels, or numpy's when a group of more than 15 splits
-                pos, goal = s.pos[idx], s.goal[idx]
-                gaze = kernels.gaze_subgroups(pos, goal, dense)
-                gaze = gaze_subgroups(pos, goal, dense) if gaze is None else gaze
+            gaze = kernels.gaze_subgroups(s.pos[idx], s.goal[idx], dense) if big else dense
             self._index_cache = (idx, dense, gaze)
         return self._index_cache
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from crowdsim import forces
 from crowdsim.groups import gaze_subgroups
-from crowdsim.kernels import any_within, cap_speed_rows
+from crowdsim.kernels import _gaze_subgroups, any_within, cap_speed_rows
 from crowdsim.kernels import gaze_subgroups as fast_gaze_subgroups
 
 
@@ -19,13 +19,14 @@ def test_gaze_kernel_matches_the_numpy_function() -> None:
         pos, goal = rng.normal(0, 1, (n, 2)), rng.normal(0, 10, (n, 2))
         if trial % 3 == 0:
             pos = np.round(pos, 1)  # ties in the projection: the stable order decides
-        got = fast_gaze_subgroups(pos, goal, label)
-        if got is None:  # a group of more than 15 splits: numpy's mean sums pairwise, the numpy path does it
+        got, compiled = _gaze_subgroups(pos, goal, label, 3)
+        if not compiled:  # a group of more than 15 splits: numpy's mean sums pairwise, the numpy path does it
             left += 1
             assert np.bincount(label).max() > 15
-            continue
-        assert got.dtype == np.int64 and np.array_equal(got, gaze_subgroups(pos, goal, label))
-    assert left < 500
+        else:
+            assert got.dtype == np.int64 and np.array_equal(got, gaze_subgroups(pos, goal, label))
+        assert np.array_equal(fast_gaze_subgroups(pos, goal, label), gaze_subgroups(pos, goal, label))
+    assert 0 < left < 500
 
 
 def test_speed_cap_and_arrival_check_match_numpy() -> None:
