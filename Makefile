@@ -46,11 +46,13 @@ soak: setup
 	$(PY) bench/soak.py
 
 # The planner benchmark behind RESULTS.md ("Planner benchmark"): suite crowdnav-v1 v5 (5 real ETH/UCY replays x 50
-# episodes, 20 synthetic cells x 10), mpc-gpgraph, mpc-cv, mpc-none and social-force, 2 workers. Resumable: rerun
-# to continue a killed run. Prints the leaderboard; files in out/bench-v5 (2026-11-25: the 12-pedestrian MPC,
-# the pairwise-assigner default predictor, arrivals back-filled in the history). Not run in CI.
+# episodes, 20 synthetic cells x 10), mpc-gpgraph, mpc-cv, mpc-none, social-force and the packaged RL agent
+# ppo-crowdnav, 2 workers (about 37 min). Resumable: rerun to continue a killed run. Prints the leaderboard; files in
+# out/bench-v5 (2026-11-25: the 12-pedestrian MPC, the pairwise-assigner default predictor, arrivals back-filled in
+# the history). Not run in CI.
 benchmark: setup
-	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v5 --data ../shared/datasets/eth_ucy
+	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v5 --data ../shared/datasets/eth_ucy \
+		--policy mpc-gpgraph mpc-cv mpc-none social-force ppo-crowdnav
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
 # (gpgraph-stgcnn-synthetic, stgcnn-synthetic); about 1.5 h on the 2-core machine. Not run in CI. See RESULTS.md.
