@@ -92,7 +92,7 @@ class TrainMonitor(BaseCallback):
         steps, total = self.model.num_timesteps, self.cfg.total_steps
         elapsed = time.perf_counter() - self.t0
         rate = (steps - self.steps0) / max(elapsed, 1e-9)
-        eta = (total - steps) / rate if rate > 0 else float("inf")
+        eta = eta_s(total, steps, rate)
         eps = list(self.model.ep_info_buffer)
         ret = np.mean([e["r"] for e in eps]) if eps else float("nan")
         succ = self.model.ep_success_buffer
@@ -172,6 +172,11 @@ def load_checkpoint(model: Any, monitor: TrainMonitor, out: Path) -> None:
     monitor.next_ckpt = (model.num_timesteps // monitor.cfg.checkpoint_every_steps + 1) \
         * monitor.cfg.checkpoint_every_steps
     print(f"resumed {out} at step {model.num_timesteps}", flush=True)
+
+
+def eta_s(total: int, steps: int, rate: float) -> float:
+    """Seconds left to reach `total` steps at `rate` steps/s: 0 once the last rollout overshot it, inf at rate 0."""
+    return max(total - steps, 0) / rate if rate > 0 else float("inf")
 
 
 def _hms(seconds: float) -> str:

@@ -277,3 +277,11 @@ def test_an_agent_trained_with_wall_rays_is_evaluated_with_them(tmp_path, capsys
     capsys.readouterr()
     assert main(argv) == 2 and "key 'walls' only in the agent's observation" in capsys.readouterr().err
     assert main([*argv, "--wall-rays", "8"]) == 0
+
+
+def test_progress_eta_never_goes_negative():
+    from envs.train_monitor import _hms, eta_s
+
+    assert _hms(eta_s(1000, 400, 100.0)) == "0:00:06"
+    assert _hms(eta_s(400000, 401408, 750.0)) == "0:00:00"  # the last rollout overshoots the total
+    assert _hms(eta_s(1000, 0, 0.0)) == "--:--:--"
