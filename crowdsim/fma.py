@@ -1,8 +1,11 @@
 """`fma(a, b, c)`: a * b + c rounded once (LLVM's fused multiply-add), for numba kernels.
 
-numpy's small matrix-vector products go through OpenBLAS, whose kernels on this project's x86-64 machines round
-each row's two-term dot product as ``fma(x0, h0, x1 * h1)`` (a test checks this against ``rows @ h``). Compiled
-code that must reproduce those numbers bit for bit, so that episodes do not change, uses this.
+numpy's small matrix products go through OpenBLAS, whose x86-64 kernels (with FMA) accumulate each two-term dot
+product from +0.0 with fused multiply-adds: ``A @ v`` gives ``fma(a0, v0, fma(a1, v1, 0))`` per row, and
+``X @ R.T`` with two or more rows gives ``fma(x1, r1, fma(x0, r0, 0))`` per entry (one row goes the first way).
+Compiled code that must reproduce numpy's numbers bit for bit, so that episodes do not change when a step gets
+faster, uses this (`envs.kernels`; `tests/envs/test_kernels.py` checks the observation against numpy's and skips
+on a machine whose BLAS rounds otherwise).
 """
 
 from __future__ import annotations

@@ -200,7 +200,7 @@ def _gaze_subgroups(pos, goal, label, max_abreast):
             py += pos[k, 1]
         hx, hy = gx / size - px / size, gy / size - py / size
         neg_proj = np.empty(size)
-        for m in range(size):  # -(pos[members] @ heading), rounded as numpy's matrix-vector product
+        for m in range(size):  # -(pos[members] @ heading) as numpy rounds it (signed zeros do not change the order)
             neg_proj[m] = -fma(pos[members[m], 0], hx, pos[members[m], 1] * hy)
         order = np.argsort(neg_proj, kind="mergesort")
         for m in range((size + 1) // 2, size):

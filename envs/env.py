@@ -27,10 +27,9 @@ from envs.attribution import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
-from envs.geometry import WallIndex, intruded_groups
+from envs.geometry import WallIndex
 from envs.history import PedHistory
-from envs.kernels import intruded_groups as fast_intruded_groups
-from envs.kernels import step_distances
+from envs.kernels import intruded_groups, step_distances
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
 from envs.rewards import StepFacts, reward_terms, weighted
@@ -358,9 +357,8 @@ class CrowdNavEnv(gym.Env):
         min_surface = float(surface.min()) if len(surface) else float("inf")
         self._nearest_row = int(active_rows[np.argmin(surface)]) if len(surface) else -1
         hit_wall = self._walls.within(here, r)
-        args = (here, r + cfg.group_space_m, p.pos, p.radius, p.group_id, cfg.group_span_m, centre)
-        groups = fast_intruded_groups(*args)
-        intruding = bool(intruded_groups(*args) if groups is None else groups)
+        intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
+                                         cfg.group_span_m, centre))
         dist_after = self._goal_distance()
         return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m, hit_wall, min_surface,
                          intruding)

@@ -10,6 +10,7 @@ import numba
 import numpy as np
 
 from crowdsim.fma import fma
+from envs import geometry
 
 
 @numba.njit(cache=True)
@@ -235,13 +236,12 @@ def _intruded(px, py, reach, pos, radius, group_id, max_span2, near_m, dist):
 
 
 def intruded_groups(robot: np.ndarray, reach_m: float, pos: np.ndarray, radius: np.ndarray, group_id: np.ndarray,
-                    max_span_m: float, dist: np.ndarray) -> list[int] | None:
-    """Compiled `geometry.intruded_groups` (the same groups, from the same float operations), given the centre
-    distances dist (n,) m; None in the one case it leaves to the numpy function (a group whose members all
-    stand at one point)."""
+                    max_span_m: float, dist: np.ndarray) -> list[int]:
+    """`geometry.intruded_groups` (the same groups, from the same float operations), compiled, given the centre
+    distances dist (n,) m; a group whose members all stand at one point goes to the numpy function."""
     if len(pos) == 0:
         return []
     out, ok = _intruded(float(robot[0]), float(robot[1]), float(reach_m), np.ascontiguousarray(pos, dtype=float),
                         np.ascontiguousarray(radius, dtype=float), np.ascontiguousarray(group_id, dtype=np.int64),
                         float(max_span_m) ** 2, float(max_span_m + reach_m + 0.5), np.ascontiguousarray(dist))
-    return out.tolist() if ok else None
+    return out.tolist() if ok else geometry.intruded_groups(robot, reach_m, pos, radius, group_id, max_span_m, dist)
