@@ -1,5 +1,6 @@
 """The benchmark leaderboard: policies x cells with Wilson intervals, pooled real and synthetic columns, and
-paired comparisons of every two policies on the same episodes (exact McNemar; paired bootstrap for path length).
+paired comparisons of every two policies on the same episodes (exact McNemar; paired bootstrap for path length
+and minimum distance).
 
 Files in the output folder: `leaderboard.json`, `leaderboard.md`, `leaderboard.png`.
 """
@@ -91,22 +92,27 @@ def _summary(board: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _diff(d: dict[str, Any] | None) -> str:
+    """A paired mean difference with its 95% interval, `*` when the interval excludes 0."""
+    if not d:
+        return "–"
+    return f"{d['mean_diff']:+.2f} [{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]{' *' if d['significant'] else ''}"
+
+
 def _paired(board: dict[str, Any]) -> list[str]:
     lines = ["### Paired comparisons (same episodes; exact McNemar, two-sided, alpha 0.05)", "",
              "| pool | A vs B | pairs | collisions A/B (A only, B only) | p | avoidable A/B | p | "
-             "successes A/B | p | group intrusions A/B | p | path A-B (m) [95% CI] |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "successes A/B | p | group intrusions A/B | p | path A-B (m) [95% CI] | min distance A-B (m) [95% CI] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for pool, comps in board["paired"].items():
         for c in comps:
             def cnt(k: str, c: dict[str, Any] = c) -> str:
                 e = c[k]
                 mark = " *" if e["significant"] else ""
                 return f"{e['a']}/{e['b']} ({e['a_only']}, {e['b_only']}) | {e['p_value']:.3g}{mark}"
-            path = c.get("path_length_m")
-            ptxt = (f"{path['mean_diff']:+.2f} [{path['ci95'][0]:+.2f}, {path['ci95'][1]:+.2f}]"
-                    f"{' *' if path['significant'] else ''}") if path else "–"
             lines.append(f"| {pool} | {c['policy_a']} vs {c['policy_b']} | {c['pairs']} | {cnt('collision')} | "
-                         f"{cnt('avoidable_collision')} | {cnt('success')} | {cnt('group_intrusion')} | {ptxt} |")
+                         f"{cnt('avoidable_collision')} | {cnt('success')} | {cnt('group_intrusion')} | "
+                         f"{_diff(c.get('path_length_m'))} | {_diff(c.get('min_distance_m'))} |")
     lines.append("")
     lines.append("`*`: significant at alpha = 0.05 (no correction for the number of comparisons).")
     return [*lines, ""]

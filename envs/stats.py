@@ -123,7 +123,9 @@ def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], al
 
     For each binary event (success, collision, avoidable collision, group intrusion): counts, the discordant
     pairs (a only, b only), the exact McNemar p-value and `significant` (p < alpha). For the path length of
-    episodes both succeeded: the mean paired difference a - b with a 95% paired-bootstrap interval (seeded by `seed`).
+    episodes both succeeded, and for the smallest robot-pedestrian surface distance of episodes where both met
+    somebody (`min_distance_m`: a graded safety margin, more sensitive than the collision count): the mean paired
+    difference a - b with a 95% paired-bootstrap interval (seeded by `seed`), `significant` when it excludes 0.
     """
     bkeys = {(r.cell, r.seed): r for r in b if r.outcome != "error"}
     pairs = [(r, bkeys[(r.cell, r.seed)]) for r in a if r.outcome != "error" and (r.cell, r.seed) in bkeys]
@@ -135,11 +137,14 @@ def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], al
         p = mcnemar_exact(only_a, only_b)
         out[name] = {"a": sum(event(x) for x, _ in pairs), "b": sum(event(y) for _, y in pairs),
                      "a_only": only_a, "b_only": only_b, "p_value": p, "significant": p < alpha}
-    both = [(x.path_length_m, y.path_length_m) for x, y in pairs if x.outcome == y.outcome == "success"]
-    if both:
-        mean, ci = paired_bootstrap(np.subtract(*np.array(both).T), np.random.default_rng(seed))
-        out["path_length_m"] = {"pairs": len(both), "mean_diff": mean, "ci95": ci,
-                                "significant": not ci[0] <= 0.0 <= ci[1]}
+    graded = {"path_length_m": [(x.path_length_m, y.path_length_m) for x, y in pairs
+                                if x.outcome == y.outcome == "success"],
+              "min_distance_m": [(x.min_distance_m, y.min_distance_m) for x, y in pairs
+                                 if x.min_distance_m is not None and y.min_distance_m is not None]}
+    for name, both in graded.items():
+        if both:
+            mean, ci = paired_bootstrap(np.subtract(*np.array(both, float).T), np.random.default_rng(seed))
+            out[name] = {"pairs": len(both), "mean_diff": mean, "ci95": ci, "significant": not ci[0] <= 0.0 <= ci[1]}
     return out
 
 

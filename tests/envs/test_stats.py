@@ -140,3 +140,16 @@ def test_aggregate_does_not_depend_on_the_order_records_arrive_in():
     shuffled = recs[:]
     random.Random(1).shuffle(shuffled)
     assert aggregate(shuffled) == aggregate(recs)
+
+
+def test_paired_min_distance_is_a_graded_margin_over_episodes_where_both_met_somebody():
+    # a keeps 0.1 m more than b (plus noise) in every episode, b met nobody in one (None: left out)
+    rng = np.random.default_rng(4)
+    base = rng.uniform(0.2, 1.0, 60)
+    a = [_rec(s, "success", ttg=5.0, mind=float(base[s] + 0.1 + rng.normal(0, 0.02)), policy="a") for s in range(60)]
+    b = [_rec(s, "success", ttg=5.0, mind=None if s == 7 else float(base[s]), policy="b") for s in range(60)]
+    c = paired_comparison(a, b)["min_distance_m"]
+    assert c["pairs"] == 59 and c["mean_diff"] == pytest.approx(0.1, abs=0.01) and c["significant"]
+    assert c["ci95"][0] < c["mean_diff"] < c["ci95"][1]
+    same = paired_comparison(b, [_rec(r.seed, "success", ttg=5.0, mind=r.min_distance_m, policy="c") for r in b])
+    assert same["min_distance_m"]["mean_diff"] == 0.0 and not same["min_distance_m"]["significant"]
