@@ -1,5 +1,9 @@
-"""Compiled per-step distances of the env (numba): the same float operations as the numpy code in
-`envs.geometry`, in one call instead of a dozen small array operations (tests compare them bit for bit).
+"""The env's per-step work compiled with numba: the step's robot-pedestrian distances (`step_distances`), the
+group-intrusion test (`intruded_groups`) and the observation's arrays (`observation_arrays`).
+
+Each computes the same floats as the numpy code it replaced (`envs.geometry`, `envs.observation`; numpy's small
+matrix products are reproduced with `crowdsim.fma`), in one call instead of a dozen small array operations, so
+episodes do not change; `tests/envs/test_kernels.py` compares them bit for bit.
 """
 
 from __future__ import annotations
