@@ -193,23 +193,24 @@ def measure_tree(tree: Path, sizes: list[int], steps: int, repeats: int, workers
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def _print_target(what: str, rates: dict[str, float], target: float) -> None:
+    """One line per rate (excluding and including resets): whether it reaches `target` env steps/s."""
+    for key, label in (("excl_wall", "excl."), ("incl_wall", "incl.")):
+        verdict = "met" if rates[key] >= target else "NOT met"
+        print(f"target >= {target:,.0f} env steps/s {what} ({label} resets, wall): {verdict} ({rates[key]:,.0f})")
+
+
 def print_targets(now: dict[str, dict[str, float]], workers: int) -> None:
     at_20, w = now.get("20"), now.get("workers")
     if at_20 is not None:
         met = at_20["excl_wall"] >= TARGET_STEPS_PER_S
         print(f"target >= {TARGET_STEPS_PER_S:,.0f} env steps/s at 20 pedestrians (excl. resets, wall): "
               f"{'met' if met else 'NOT met'} ({at_20['excl_wall']:,.0f}; CPU-time rate {at_20['excl_cpu']:,.0f})")
-        for key, label in (("excl_wall", "excl."), ("incl_wall", "incl.")):
-            met = at_20[key] >= TARGET_ONE_PROCESS
-            print(f"target >= {TARGET_ONE_PROCESS:,.0f} env steps/s at 20 pedestrians, one process ({label} resets, "
-                  f"wall): {'met' if met else 'NOT met'} ({at_20[key]:,.0f})")
+        _print_target("at 20 pedestrians, one process", at_20, TARGET_ONE_PROCESS)
     if w is not None:
         print(f"{workers} workers, 20 pedestrians: aggregate {w['incl_wall']:,.0f} steps/s including resets, "
               f"summed {w['excl_wall']:,.0f} excluding them")
-        for key, label in (("excl_wall", "excl."), ("incl_wall", "incl.")):
-            met = w[key] >= TARGET_AGGREGATE
-            print(f"target >= {TARGET_AGGREGATE:,.0f} env steps/s aggregate with {workers} workers ({label} "
-                  f"resets): {'met' if met else 'NOT met'} ({w[key]:,.0f})")
+        _print_target(f"aggregate with {workers} workers", w, TARGET_AGGREGATE)
 
 
 def compare_rows(before: dict[str, dict[str, float]], now: dict[str, dict[str, float]], workers: int) -> list[str]:
