@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 from crowdsim.groups import dense_rank, gaze_subgroups
+from crowdsim.kernels import _gaze_subgroups
+from crowdsim.kernels import gaze_subgroups as fast_gaze_subgroups
 from crowdsim.state import Slots
 from envs.geometry import (
     WallIndex,
@@ -129,15 +133,33 @@ def _gaze_reference(pos: np.ndarray, goal: np.ndarray, label: np.ndarray) -> np.
     return np.unique(sub, return_inverse=True)[1]
 
 
-def test_gaze_subgroups_matches_the_per_group_scan_bit_for_bit() -> None:
+def _gaze_cases(trials: int) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Random crowds (pos, goal (n, 2) m, dense labels (n,)) of 1-119 people, every third with ties in the
+    projection (positions rounded to 0.1 m), where the stable order decides."""
     rng = np.random.default_rng(5)
-    for trial in range(300):
+    for trial in range(trials):
         n = int(rng.integers(1, 120))
         label = np.unique(rng.integers(0, int(rng.integers(1, n + 1)), n), return_inverse=True)[1]
         pos, goal = rng.normal(0, 1, (n, 2)), rng.normal(0, 10, (n, 2))
-        if trial % 3 == 0:
-            pos = np.round(pos, 1)  # ties in the projection: the stable order decides
+        yield (np.round(pos, 1) if trial % 3 == 0 else pos), goal, label
+
+
+def test_gaze_subgroups_matches_the_per_group_scan_bit_for_bit() -> None:
+    for pos, goal, label in _gaze_cases(300):
         assert np.array_equal(gaze_subgroups(pos, goal, label), _gaze_reference(pos, goal, label))
+
+
+def test_gaze_kernel_matches_the_numpy_function() -> None:
+    left = 0
+    for pos, goal, label in _gaze_cases(1500):
+        got, compiled = _gaze_subgroups(pos, goal, label, 3)
+        if not compiled:  # a group of more than 15 splits: numpy's mean sums pairwise, the numpy path does it
+            left += 1
+            assert np.bincount(label).max() > 15
+        else:
+            assert got.dtype == np.int64 and np.array_equal(got, gaze_subgroups(pos, goal, label))
+        assert np.array_equal(fast_gaze_subgroups(pos, goal, label), gaze_subgroups(pos, goal, label))
+    assert 0 < left < 500
 
 
 def test_group_means_add_rows_in_order_as_numpy_mean_does() -> None:
