@@ -1,7 +1,7 @@
 """Benchmark backends: Ray's per-episode overhead against the local process pool, and per-cell planner times.
 
 1. Backends. The same short episodes (suite cell `corridor-low-visible` of `smoke`, policy `mpc-cv` and
-   `random`, 2 s episodes, seeds 0..E-1) through `envs.runner.run_tasks` with the local process pool and with
+   `random`, 2 s episodes, seeds 0..E-1) through `envs.evaluation.pool.run_tasks` with the local process pool and with
    Ray (a local instance, `ray.init(num_cpus=W)`), both with W workers. Ray's start-up is timed apart. Per
    backend: wall time, wall s per episode, and the ratio Ray / pool; the records must be identical up to
    wall-clock fields (checked and printed).
@@ -19,9 +19,10 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from envs.evaluation.episode import EpisodeTask
+from envs.evaluation.pool import run_tasks
+from envs.evaluation.suite import load_suite
 from envs.policies import ENV_MPC, PolicyConfig
-from envs.runner import EpisodeTask, run_tasks
-from envs.suite import load_suite
 
 
 def tasks(episodes: int, policy: str) -> list[EpisodeTask]:

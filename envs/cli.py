@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from crowdsim.cli import OneLineParser, show_defaults  # the CLI conventions, shared with crowdsim
-from envs import train as train_module
 from envs.cli_options import add_backend_options, add_policy_options, check_backend, default_workers, policy_configs
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from envs.rl import train as train_module
 
 DEMO_POLICY = "mpc-gpgraph"
 DEMO_SCENARIO = "plaza"
@@ -91,8 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--predictor", default=None, metavar="NAME", help="instead of the shipped GP-Graph")
     d.add_argument("--no-progress", action="store_true", help="no progress bar")
 
-    t = sub.add_parser("train", help="train a PPO agent (envs.train; needs the 'rl' extra)",
-                       description=train_module.__doc__.splitlines()[0] + " (python -m envs.train --help: the details)")
+    t = sub.add_parser("train", help="train a PPO agent (envs.rl.train; needs the 'rl' extra)",
+                       description=train_module.__doc__.splitlines()[0] + " (python -m envs.rl.train --help: details)")
     train_module.add_arguments(t)
 
     for name, text in (("policies", "list the policy names"), ("scenarios", "list the scenario names"),
@@ -144,8 +144,8 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
 
 def _evaluate(args: argparse.Namespace) -> int:
     from envs.atomic import check_writable_dir, check_writable_file, write_json_atomic, write_text_atomic
-    from envs.evaluate import check_setup, evaluate
-    from envs.report import compare, compare_json, compare_png, markdown_table
+    from envs.evaluation.evaluate import check_setup, evaluate
+    from envs.evaluation.report import compare, compare_json, compare_png, markdown_table
 
     if args.episodes < 1 or args.seed < 0 or args.record < 0:
         raise UsageError("--episodes must be >= 1, --seed and --record >= 0")
@@ -175,9 +175,9 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _benchmark(args: argparse.Namespace) -> int:
-    from envs.benchmark import run_benchmark
-    from envs.leaderboard import leaderboard_markdown
-    from envs.suite import load_suite
+    from envs.evaluation.benchmark import run_benchmark
+    from envs.evaluation.leaderboard import leaderboard_markdown
+    from envs.evaluation.suite import load_suite
 
     check_backend(args)
     suite = load_suite(args.suite)
@@ -198,9 +198,9 @@ def _demo(args: argparse.Namespace) -> int:
     import os
 
     from envs.atomic import check_writable_dir, write_json_atomic
-    from envs.evaluate import evaluate
+    from envs.evaluation.evaluate import evaluate
+    from envs.evaluation.report import markdown_table
     from envs.policies import PolicyConfig
-    from envs.report import markdown_table
 
     if args.episodes < 1 or args.workers < 1:
         raise UsageError("--episodes and --workers must be >= 1")
@@ -228,7 +228,7 @@ def _list(command: str) -> int:
     elif command == "scenarios":
         print("\n".join(scenario_names()))
     else:
-        from envs.suite import load_suite, suite_names
+        from envs.evaluation.suite import load_suite, suite_names
 
         for name in suite_names():
             s = load_suite(name)

@@ -11,9 +11,9 @@ import os
 from dataclasses import fields, replace
 from typing import Any
 
-from envs.plugins import is_plugin
+from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, PREDICTOR_POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
-from envs.runner import BACKENDS
+from envs.policies.plugins import is_plugin
 
 
 def default_workers() -> int:
@@ -88,6 +88,6 @@ def check_backend(args: argparse.Namespace) -> None:
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address needs --backend ray")
     if args.backend == "ray":
-        from envs.ray_backend import require_ray
+        from envs.evaluation.pool import require_ray
 
         require_ray()

@@ -23,7 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim import CrowdState
-from envs.attribution import SPAWN_WINDOW_S, SpawnContacts, collision_kind
+from envs.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.crowd import Crowd, SimCrowd
 from envs.frame import SceneFrame
@@ -364,7 +364,7 @@ class CrowdNavEnv(gym.Env):
                          intruding)
 
     def _is_new(self, row: int) -> bool:
-        """Whether the pedestrian in state row `row` is new (`envs.attribution`): its slot held nobody or somebody
+        """Whether the pedestrian in state row `row` is new (`envs.collisions`): its slot held nobody or somebody
         else at the step's start, or (replays) its track began less than SPAWN_WINDOW_S ago."""
         before, s = self._step_start[1], self._state
         if not (before.active[row] and before.ped_id[row] == s.ped_id[row]):
@@ -373,7 +373,7 @@ class CrowdNavEnv(gym.Env):
         return track_age_s is not None and track_age_s(int(s.ped_id[row])) < SPAWN_WINDOW_S - 1e-9
 
     def _collision_kind(self) -> str:
-        """The kind of this step's pedestrian contact (`envs.attribution`): the pedestrian nearest along the step
+        """The kind of this step's pedestrian contact (`envs.collisions`): the pedestrian nearest along the step
         (`_facts`)."""
         before_pos = self._step_start[0]
         s, here, row = self._state, self.robot_state[:2], self._nearest_row

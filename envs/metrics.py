@@ -16,12 +16,12 @@ class EpisodeMetrics:
     min_distance_m: smallest surface distance (centre distance minus both radii) between the robot and
         any pedestrian over the episode, m (inf if nobody was ever in the scene; negative = overlap).
     discomfort_frequency: fraction of steps whose smallest surface distance is under the comfort distance.
-    collision_with: "pedestrian" or "wall"; collision_kind: "robot", "pedestrian" or "spawn" (`envs.attribution`);
+    collision_with: "pedestrian" or "wall"; collision_kind: "robot", "pedestrian" or "spawn" (`envs.collisions`);
     collision_time_s: time of the collision, s (NaN without one).
     group_intrusion: whether the robot's body overlapped a ground-truth group's region on any step.
     intrusion_fraction: fraction of steps with such an overlap.
     spawn_contacts: contacts of kind "spawn" that did not end the episode
-        (`CrowdNavConfig.spawn_contact_ends_episode` False; `envs.attribution.SpawnContacts`).
+        (`CrowdNavConfig.spawn_contact_ends_episode` False; `envs.collisions.SpawnContacts`).
     """
 
     steps: int = 0

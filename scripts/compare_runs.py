@@ -15,8 +15,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from envs.records import EpisodeRecord, read_records
-from envs.stats import PAIRED_EVENTS, paired_comparison
+from envs.evaluation.records import EpisodeRecord, read_records
+from envs.evaluation.stats import PAIRED_EVENTS, paired_comparison
 
 EVENTS = tuple(PAIRED_EVENTS)  # success, collision, avoidable collision, group intrusion
 

@@ -2,7 +2,7 @@
 
     python scripts/plot_learning_curves.py out/train/cc5-dagger out/train/cc5-cold --out docs/rl_learning_curves.png
 
-Each run folder's eval.csv (written by `envs.train`) is one line per curve; the label is the folder name and
+Each run folder's eval.csv (written by `envs.rl.train`) is one line per curve; the label is the folder name and
 the warm start read from its config.json. Wall time includes the warm start (demonstrations, cloning, DAgger).
 """
 

@@ -1,7 +1,7 @@
 """Tune the crowd MPC among real (replayed ETH/UCY) pedestrians on recordings disjoint from the reported ones.
 
 Runs N episodes per recording for each (policy, MPC variant) on the same seeds, in at most 2 worker processes,
-and prints one row per (recording, policy, variant): success / collision (of which kind "spawn", `envs.attribution`)
+and prints one row per (recording, policy, variant): success / collision (of which kind "spawn", `envs.collisions`)
 / timeout rates and plan-time p50/p95 (ms, every solver call). Episodes follow the suites' rules (the defaults of
 `crowdnav-tune`, equal to crowdnav-v1's: 40 s, a spawn contact does not end the episode), and each
 collision line names its kind (robot / pedestrian). For the paired, suite-based check on the tuning suite see
@@ -114,9 +114,9 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
     if key not in _CACHE:
         from envs.config import CrowdNavConfig
         from envs.env import CrowdNavEnv
+        from envs.evaluation.suite import load_suite
         from envs.policies import GPGraphPolicy, PlannerPolicy, singleton_prediction
         from envs.replay import ReplayConfig
-        from envs.suite import load_suite
         from planner import ConstantVelocityMPC
 
         defaults = load_suite(TUNING_SUITE).cells[0].defaults  # the suites' episode rules (time limit, spawns)
@@ -149,7 +149,7 @@ def _collision_geometry(env) -> dict:
 
 def run_one(task: tuple) -> dict:
     """One episode: (recording, policy, variant, overrides, base, seed) -> a flat record."""
-    from envs.rollout import run_episode
+    from envs.evaluation.episode import run_episode
 
     recording, policy, variant, overrides, base, seed = task
     cfg, env, pol = _env_and_policy(recording, policy, variant, overrides, base)

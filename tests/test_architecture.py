@@ -9,7 +9,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 CORE = ("crowdsim", "predictor", "planner")
-RL_MODULES = {"envs/extractor.py", "envs/imitation.py", "envs/train_monitor.py"}
+RL_MODULES = {"envs/rl/extractor.py", "envs/rl/imitation.py", "envs/rl/monitor.py"}
 
 
 def _imports(path: Path) -> set[str]:
@@ -35,9 +35,9 @@ def test_core_packages_never_import_each_other(package):
 
 @pytest.mark.parametrize("module, allowed", [
     ("pymunk", {"crowdsim/world.py"}),
-    ("rerun", {"crowdsim/recording.py", "envs/rerun_observer.py", "envs/recording.py"}),
+    ("rerun", {"crowdsim/recording.py", "envs/rerun_observer.py"}),
     ("torch", RL_MODULES),  # torch inside predictor/, and in envs only where SB3 needs it (the rl extra)
-    ("stable_baselines3", {*RL_MODULES, "envs/sb3_io.py", "envs/train.py"}),
+    ("stable_baselines3", {*RL_MODULES, "envs/policies/sb3_files.py", "envs/rl/train.py"}),
     ("casadi", None),  # casadi only inside planner/
     ("ray", {"crowdsim/distributed.py"}),  # the optional Ray backend (envs reuses it)
 ])
@@ -49,3 +49,60 @@ def test_heavy_dependencies_stay_in_their_place(module, allowed):
             if module in _imports(path):
                 ok = (allowed is not None and rel in allowed) or (home is not None and rel.startswith(f"{home}/"))
                 assert ok, f"{rel} imports {module}"
+
+
+# envs/ is four rooms. Each room may import the rooms listed for it (and itself); the core imports no other room.
+# The two entry points of the package (its __init__, which registers the env and re-exports the policy registry,
+# and the `crowdnav` command line) may import every room.
+ROOMS = {
+    "core": set(),
+    "policies": {"core"},
+    "evaluation": {"core", "policies"},
+    "rl": {"core", "policies", "evaluation"},
+}
+ENTRY_POINTS = {"envs/__init__.py", "envs/cli.py", "envs/cli_options.py"}
+
+
+def _room(module: str) -> str:
+    """The room of a module name inside envs ('envs.policies.registry' -> 'policies', 'envs.env' -> 'core')."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in ROOMS else "core"
+
+
+def _envs_imports(path: Path) -> set[str]:
+    """Every module of envs that `path` imports, at any depth (lazy imports inside functions included)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names if a.name.split(".")[0] == "envs")
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "envs":
+            names.add(node.module)
+            names.update(f"{node.module}.{a.name}" for a in node.names if _room(f"{node.module}.{a.name}") != "core")
+    return names
+
+
+def test_every_envs_module_lives_in_one_of_the_four_rooms():
+    for path in _sources("envs"):
+        rel = path.relative_to(ROOT / "envs").parts
+        assert len(rel) == 1 or rel[0] in ROOMS, f"envs/{'/'.join(rel)} is outside the rooms {sorted(ROOMS)}"
+
+
+def test_rooms_import_only_the_rooms_below_them():
+    for path in _sources("envs"):
+        rel = path.relative_to(ROOT).as_posix()
+        if rel in ENTRY_POINTS:
+            continue
+        parts = path.relative_to(ROOT / "envs").parts
+        room = parts[0] if len(parts) > 1 else "core"
+        for name in _envs_imports(path):
+            target = _room(name)
+            assert target == room or target in ROOMS[room], f"{rel} ({room}) imports {name} ({target})"
+
+
+def test_the_room_rule_catches_an_upward_import(tmp_path):
+    """The rule above can fail: the core importing the evaluation room is seen, lazily or not."""
+    bad = tmp_path / "env.py"
+    bad.write_text("def f():\n    from envs.evaluation.pool import run_tasks\n")
+    assert {_room(n) for n in _envs_imports(bad)} == {"evaluation"}
+    bad.write_text("from envs import rl\n")
+    assert {_room(n) for n in _envs_imports(bad)} == {"core", "rl"}

@@ -1,7 +1,7 @@
 """Packaged checkpoints (``<name>.safetensors``), loadable by name with ``predictor.load_predictor``.
 
 This package imports no torch: `checkpoint_file` tells which file a name or path loads (used by
-`predictor.checkpoint.resolve` and by `envs.artifacts` to fingerprint the weights behind a name).
+`predictor.checkpoint.resolve` and by `envs.policies.identity` to fingerprint the weights behind a name).
 """
 
 from __future__ import annotations

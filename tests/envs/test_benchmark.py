@@ -7,11 +7,11 @@ from dataclasses import replace
 
 import pytest
 
-from envs.benchmark import RECORDS, plan_benchmark, run_benchmark
 from envs.cli import main
+from envs.evaluation.benchmark import RECORDS, plan_benchmark, run_benchmark
+from envs.evaluation.records import EpisodeRecord, RecordStore, merge_records, read_records
+from envs.evaluation.suite import load_suite, parse_suite, suite_names
 from envs.policies import ENV_MPC, PolicyConfig
-from envs.records import EpisodeRecord, RecordStore, merge_records, read_records
-from envs.suite import load_suite, parse_suite, suite_names
 
 TINY = {"name": "tiny", "version": 1, "description": "test", "defaults": {"time_limit_s": 2.0},
         "cells": [{"name": "corridor-a", "scenario": "corridor", "n_pedestrians": 4, "robot_visible": True,
@@ -122,11 +122,11 @@ def test_records_under_other_settings_refuse_to_merge(tmp_path):
 
 
 def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_path):
-    """Retrained weights behind an unchanged predictor name or path change the fingerprint (envs.artifacts)."""
+    """Retrained weights behind an unchanged predictor name or path change the fingerprint (envs.policies.identity)."""
     import shutil
 
-    from envs.artifacts import artifact_digest, artifact_files
-    from envs.benchmark import episode_fingerprint
+    from envs.evaluation.benchmark import episode_fingerprint
+    from envs.policies.identity import artifact_digest, artifact_files
     from predictor.checkpoint import PACKAGE_CHECKPOINTS
 
     weights = tmp_path / "model.safetensors"
@@ -144,7 +144,7 @@ def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_pat
     with pytest.raises(ValueError, match="other settings"):
         plan_benchmark(suite, [cell], [pcfg], tmp_path, recorded=[old])
     # policies that load no weights keep the fingerprint they had before digests existed
-    from envs.runner import fingerprint
+    from envs.evaluation.episode import fingerprint
     plain = PolicyConfig("random")
     assert episode_fingerprint(suite, cell, plain) == fingerprint(suite.name, suite.version, cell.spec,
                                                                   cell.defaults, plain.to_json())

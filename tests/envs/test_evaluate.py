@@ -1,4 +1,4 @@
-"""`envs.evaluate` (aggregates, worker-count independence, report files) and the `crowdnav` CLI."""
+"""`envs.evaluation.evaluate` (aggregates, worker-count independence, report files) and the `crowdnav` CLI."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import pytest
 
 from envs.cli import main
 from envs.config import CrowdNavConfig
-from envs.evaluate import evaluate
+from envs.evaluation.evaluate import evaluate
+from envs.evaluation.report import compare
 from envs.policies import ENV_MPC, PolicyConfig
-from envs.report import compare
 
 REQUIRED_KEYS = {
     "policy", "scenario", "seed", "episodes", "config", "episode_list",

@@ -12,7 +12,7 @@ import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
 from envs.cli import main
-from envs.evaluate import evaluate
+from envs.evaluation.evaluate import evaluate
 from envs.policies import PolicyConfig, make_policy
 
 README = Path(__file__).resolve().parents[2] / "README.md"

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
+from envs.evaluation.episode import run_episode
 from envs.policies import POLICIES, PolicyConfig, make_policy
-from envs.rollout import run_episode
 
 CFG = CrowdNavConfig(n_pedestrians=16, time_limit_s=30.0)
 

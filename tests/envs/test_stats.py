@@ -1,4 +1,4 @@
-"""`envs.stats`: Wilson intervals, the per-policy summary of typed records, and paired tests."""
+"""`envs.evaluation.stats`: Wilson intervals, the per-policy summary of typed records, and paired tests."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from envs.records import EpisodeRecord
-from envs.stats import aggregate, mcnemar_exact, paired_bootstrap, paired_comparison, wilson_interval
+from envs.evaluation.records import EpisodeRecord
+from envs.evaluation.stats import aggregate, mcnemar_exact, paired_bootstrap, paired_comparison, wilson_interval
 
 
 def _rec(seed, outcome, ttg=None, path=10.0, mind=0.5, disc=0.0, intr=False, plans=10, fallbacks=0, times=(),
@@ -129,8 +129,8 @@ def test_aggregate_does_not_depend_on_the_order_records_arrive_in():
     """Workers finish in any order (process pool, Ray); the summary must be bit-identical either way."""
     import random
 
-    from envs.records import EpisodeRecord
-    from envs.stats import aggregate
+    from envs.evaluation.records import EpisodeRecord
+    from envs.evaluation.stats import aggregate
 
     rng = np.random.default_rng(0)
     recs = [EpisodeRecord(policy="p", seed=s, outcome="success", cell="c", ret=float(rng.normal()) * 1e3 + 0.1,

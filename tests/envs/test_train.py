@@ -12,9 +12,9 @@ import torch
 
 from envs import CrowdNavConfig, CrowdNavEnv, ObservationConfig
 from envs.cli import main
-from envs.extractor import CrowdAttentionExtractor
-from envs.obs_layout import field_names, flat_size, layout_table, unflatten
-from envs.train import TrainConfig, train
+from envs.observation import field_names, flat_size, layout_table, unflatten
+from envs.rl.extractor import CrowdAttentionExtractor
+from envs.rl.train import TrainConfig, train
 
 TINY = TrainConfig(pedestrians=5, time_limit_s=6.0, total_steps=512, envs=2, n_steps=128, batch_size=64,
                    n_epochs=2, eval_every_steps=256, eval_episodes=2, checkpoint_every_steps=256,
@@ -73,7 +73,7 @@ def test_extractor_is_a_set_function_of_the_real_rows(groups):
 def test_behaviour_cloning_fits_the_experts_actions():
     from stable_baselines3 import PPO
 
-    from envs.imitation import behaviour_clone, collect_demos
+    from envs.rl.imitation import behaviour_clone, collect_demos
 
     cfg = TINY.env_config()
     demos = collect_demos(cfg, "mpc-cv", episodes=2, seed=7)
@@ -118,7 +118,7 @@ def test_train_evaluates_checkpoints_resumes_and_refuses_other_layouts(tmp_path)
 
 @pytest.mark.slow
 def test_diverged_training_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsys):
-    import envs.train_monitor as tm
+    import envs.rl.monitor as tm
 
     out = tmp_path / "run"
     assert train(TINY, out) == 0
@@ -162,7 +162,7 @@ def test_train_resume_and_config_errors(tmp_path, capsys):
     good = tmp_path / "good.toml"
     good.write_text('scenario = "corridor"\npedestrians = 4\n[rewards]\ncollision = -20.0\n')
     from crowdsim.cli import OneLineParser
-    from envs.train import add_arguments, config_from_args
+    from envs.rl.train import add_arguments, config_from_args
 
     parser = OneLineParser()
     add_arguments(parser)
@@ -173,7 +173,7 @@ def test_train_resume_and_config_errors(tmp_path, capsys):
 def test_readme_layout_table_matches_the_code():
     from pathlib import Path
 
-    from envs.obs_layout import blocks
+    from envs.observation import blocks
 
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     for b in blocks(CrowdNavConfig()):
@@ -185,7 +185,7 @@ def test_a_corrupt_agent_file_is_one_line_on_the_command_line(tmp_path, capsys):
 
     from stable_baselines3 import PPO
 
-    from envs.sb3_io import save_agent
+    from envs.policies.sb3_files import save_agent
 
     cfg = TINY.env_config()
     good = tmp_path / "agent.zip"
@@ -208,7 +208,7 @@ def test_packaged_ppo_agent_crosses_the_circle_on_unseen_seeds():
     """`ppo-crowdnav` loads by name and reaches the goal in most unseen circle-crossing episodes (5 invisible
     pedestrians, the setting it was trained in; RESULTS.md reports 500 episodes). Seeds 400000+: never used in
     training (its resets draw from seeds 0-7) or in its checkpoint selection (100000+)."""
-    from envs.evaluate import evaluate
+    from envs.evaluation.evaluate import evaluate
     from envs.policies import PolicyConfig
 
     cfg = CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, robot_visible=False)
@@ -217,7 +217,7 @@ def test_packaged_ppo_agent_crosses_the_circle_on_unseen_seeds():
 
 
 def test_demos_of_another_layout_are_refused_before_any_work(tmp_path, capsys):
-    from envs.imitation import Demos
+    from envs.rl.imitation import Demos
 
     p = 8
     demos = Demos({"robot": np.zeros((3, 7), np.float32), "pedestrians": np.zeros((3, p, 5), np.float32),
@@ -280,7 +280,7 @@ def test_an_agent_trained_with_wall_rays_is_evaluated_with_them(tmp_path, capsys
 
 
 def test_progress_eta_never_goes_negative():
-    from envs.train_monitor import _hms, eta_s
+    from envs.rl.monitor import _hms, eta_s
 
     assert _hms(eta_s(1000, 400, 100.0)) == "0:00:06"
     assert _hms(eta_s(400000, 401408, 750.0)) == "0:00:00"  # the last rollout overshoots the total

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from envs.records import EpisodeRecord, RecordStore
-from envs.suite import load_suite
+from envs.evaluation.records import EpisodeRecord, RecordStore
+from envs.evaluation.suite import load_suite
 
 
 def _episodes(cell) -> set[tuple]:

@@ -18,7 +18,7 @@ from typing import Any
 from envs.atomic import append_line
 
 OUTCOMES = ("success", "collision", "timeout", "error")
-# How a collision came about (`envs.attribution`): the robot moved into a pedestrian or wall; a pedestrian walked
+# How a collision came about (`envs.collisions`): the robot moved into a pedestrian or wall; a pedestrian walked
 # into a stopped or retreating robot; a replayed track began within contact distance of the robot.
 COLLISION_KINDS = ("robot", "pedestrian", "spawn")
 AVOIDABLE_KINDS = ("robot", "pedestrian")

@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 
 from envs.atomic import write_json_atomic, write_text_atomic
+from envs.evaluation.records import EpisodeRecord
+from envs.evaluation.report import fmt, pyplot, rate_errors, rate_text, save_figure
+from envs.evaluation.stats import aggregate, paired_comparison
+from envs.evaluation.suite import Cell, Suite
 from envs.policies import PolicyConfig
-from envs.records import EpisodeRecord
-from envs.report import fmt, pyplot, rate_errors, rate_text, save_figure
-from envs.stats import aggregate, paired_comparison
-from envs.suite import Cell, Suite
 
 POOLS = ("real", "synthetic", "all")
 
@@ -29,7 +29,7 @@ def _pool(cells: list[Cell], pool: str) -> set[str]:
 
 def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig],
                 records: list[EpisodeRecord]) -> dict[str, Any]:
-    """JSON-ready: per cell and pool, each policy's `envs.stats.aggregate` (without per-episode data), and the
+    """JSON-ready: per cell and pool, each policy's `stats.aggregate` (without per-episode data), and the
     paired comparisons of every policy pair per pool (pairs matched by cell and seed)."""
     by: dict[tuple[str, str], list[EpisodeRecord]] = {}
     for r in records:

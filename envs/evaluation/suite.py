@@ -1,6 +1,6 @@
 """Named, versioned benchmark suites: cells (an env config each) with fixed seed lists, read from package data.
 
-A suite file `envs/suites/<name>.json` holds {"name", "version", "description", "defaults", "cells": [...]}.
+A suite file `envs/evaluation/suites/<name>.json` holds {"name", "version", "description", "defaults", "cells": [...]}.
 A cell is either simulated ({"name", "scenario", "n_pedestrians", "robot_visible", "options"?, "episodes",
 "seed0"}) or a real-crowd replay ({"name", "replay": [files relative to the data folder], "frame_step_s",
 "episodes", "seed0"}). Any cell may name its `scene` (default: "synthetic" for simulated cells) and the
@@ -29,8 +29,8 @@ _DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m", "spawn_
 
 
 def suite_names() -> list[str]:
-    """The suites shipped in `envs/suites/`."""
-    return sorted(p.name[:-5] for p in resources.files("envs.suites").iterdir() if p.name.endswith(".json"))
+    """The suites shipped in `envs/evaluation/suites/`."""
+    return sorted(p.name[:-5] for p in resources.files("envs.evaluation.suites").iterdir() if p.name.endswith(".json"))
 
 
 @dataclass(frozen=True)
@@ -149,5 +149,5 @@ def load_suite(name: str) -> Suite:
     """A shipped suite by name (`suite_names()`); unknown names raise listing the valid ones."""
     if name not in suite_names():
         raise ValueError(f"unknown suite {name!r}; valid names: {', '.join(suite_names())}")
-    text = resources.files("envs.suites").joinpath(f"{name}.json").read_text()
+    text = resources.files("envs.evaluation.suites").joinpath(f"{name}.json").read_text()
     return parse_suite(json.loads(text), f"suite {name}")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from envs import CrowdNavEnv
-from envs.attribution import STOPPED_MPS, collision_kind
+from envs.collisions import STOPPED_MPS, collision_kind
 from envs.replay import ReplayConfig
 from tests.envs.test_env import place_robot
 

@@ -1,34 +1,97 @@
-"""Episode runner: one task = one episode of one policy in one env config, run locally or on Ray.
+"""One episode: run a policy in the env (`run_episode`), and one benchmark task (`EpisodeTask` -> `run_task`).
 
-`run_task(task)` builds (once per process, cached by settings) the env and the policy, runs the episode and
-returns its typed record (and, on request, the trajectories for plots). Every episode starts from a reset env
-and policy with the task's seed, so a record does not depend on which process ran it: the local process pool
-(the default; "forkserver" on Linux, since torch is not fork-safe), a single process, and Ray tasks give
-identical records. A policy that raises inside an episode yields a record with outcome "error" and the
-traceback in `error_dir`; the run goes on.
+`run_episode` resets the env with a seed, acts with the policy until the episode ends and collects its metrics,
+trajectories and planner statistics. `run_task(task)` builds (once per process, cached by settings) the env and
+the policy, runs the task's episode and returns its typed record (and, on request, the trajectories for plots).
+Every episode starts from a reset env and policy with the task's seed, so a record does not depend on which
+process ran it (`envs.evaluation.pool`). A policy that raises inside an episode yields a record with outcome
+"error" and the traceback in `error_dir`; the run goes on.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import pickle
-import sys
+import time
 import traceback
-from collections.abc import Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from envs.config import CrowdNavConfig
-from envs.policies import PolicyConfig
-from envs.records import EpisodeRecord, finite_or_none
+from envs.env import CrowdNavEnv
+from envs.evaluation.records import EpisodeRecord, finite_or_none
+from envs.policies import PolicyConfig, make_policy
 
-BACKENDS = ("local", "ray")
+
+@dataclass
+class EpisodeResult:
+    """One episode.
+
+    metrics: `EpisodeMetrics.as_dict()` plus the planner's plan count, fallback count and solve times (ms).
+    robot_xy: (T + 1, 2) robot positions, m. goal: (2,) m. ret: the undiscounted return.
+    ped_xy: per step (N_t, 2) positions and group ids (kept only when `keep_scene` is set).
+    """
+
+    seed: int
+    policy: str
+    metrics: dict[str, Any]
+    robot_xy: np.ndarray
+    goal: np.ndarray
+    ret: float
+    solve_times_ms: list[float] = field(default_factory=list)
+    ped_xy: list[np.ndarray] = field(default_factory=list)
+    ped_groups: list[np.ndarray] = field(default_factory=list)
+    wall_time_s: float = 0.0
+
+
+def run_episode(config: CrowdNavConfig, policy_spec: str | PolicyConfig, seed: int, keep_scene: bool = False,
+                observer: Any = None, env: CrowdNavEnv | None = None, policy: Any = None) -> EpisodeResult:
+    """Reset with `seed`, act with the policy (a name or `PolicyConfig`; or `policy`, already built) until the
+    episode ends. `observer.log(frame)` (e.g. a `RerunObserver`) receives every frame. Pass env/policy to reuse
+    them across episodes."""
+    start = time.perf_counter()
+    env = env or CrowdNavEnv(config)
+    policy = policy or make_policy(policy_spec, env)
+    obs, _ = env.reset(seed=seed)
+    policy.reset(env, seed)
+    calls0, fallbacks0, times0 = _counts(policy)
+    robot, ret, done, info = [env.robot_state[:2].copy()], 0.0, False, {}
+    peds, groups = [], []
+    scalars: dict[str, float] = {}
+    while not done:
+        action = policy.act(obs, env)
+        if observer is not None:
+            observer.log(env.frame(scalars))
+        if keep_scene:
+            p = env.pedestrians()
+            peds.append(p.pos.copy())
+            groups.append(p.group_id.copy())
+        obs, reward, terminated, truncated, info = env.step(action)
+        robot.append(env.robot_state[:2].copy())
+        ret += reward
+        done = terminated or truncated
+        scalars = {**info["reward_terms"], "reward": reward, "goal_distance_m": info["goal_distance_m"],
+                   "min_surface_distance_m": min(info["min_surface_distance_m"], 99.0)}
+    if observer is not None:
+        observer.log(env.frame(scalars))
+    calls1, fallbacks1, times1 = _counts(policy)
+    metrics = dict(info["episode_metrics"])
+    metrics.update(plans=calls1 - calls0, fallbacks=fallbacks1 - fallbacks0)
+    return EpisodeResult(seed, policy.name, metrics, np.array(robot), env.goal.copy(), ret,
+                         [t * 1e3 for t in times1[len(times0):]], peds, groups, time.perf_counter() - start)
+
+
+def _counts(policy: Any) -> tuple[int, int, list[float]]:
+    """(plans, fallbacks, solve times s) so far; zeros for a policy without `stats` (e.g. a plug-in)."""
+    stats = getattr(policy, "stats", None)
+    if stats is None:
+        return 0, 0, []
+    fallbacks = sum(v for k, v in stats.counts.items() if k.startswith("fallback_"))
+    return stats.counts["calls"], fallbacks, list(stats.solve_times_s)
 
 
 @dataclass(frozen=True)
@@ -53,13 +116,13 @@ def fingerprint(*parts: Any) -> str:
 
 
 def record_of(task: EpisodeTask, result: Any, policy_name: str) -> EpisodeRecord:
-    """The typed record of an `envs.rollout.EpisodeResult` run for `task`."""
+    """The typed record of an `EpisodeResult` run for `task`."""
     return episode_record(result, policy_name, task.seed, task.cell, task.fingerprint)
 
 
 def episode_record(result: Any, policy_name: str, seed: int, cell: str = "", fingerprint: str = "") -> EpisodeRecord:
-    """The typed record of an `envs.rollout.EpisodeResult` (also for episodes run outside a task, e.g. the
-    training evaluation of `envs.train_monitor`)."""
+    """The typed record of an `EpisodeResult` (also for episodes run outside a task, e.g. the
+    training evaluation of `envs.rl.monitor`)."""
     m = result.metrics
     return EpisodeRecord(
         policy=policy_name, seed=int(seed), outcome=m["outcome"], cell=cell,
@@ -78,16 +141,11 @@ class _Runner:
     """One env and one policy, built once and reused for every episode of a process."""
 
     def __init__(self, env_config: CrowdNavConfig, policy_config: PolicyConfig) -> None:
-        from envs.env import CrowdNavEnv
-        from envs.policies import make_policy
-
         self.env = CrowdNavEnv(env_config)
         self.policy = make_policy(policy_config, self.env)
         self.policy_name = policy_config.name
 
     def run(self, task: EpisodeTask) -> dict[str, Any]:
-        from envs.rollout import run_episode
-
         try:
             if task.rrd_path is not None:
                 from envs.rerun_observer import RerunObserver
@@ -131,42 +189,3 @@ def run_task(task: EpisodeTask) -> dict[str, Any]:
             _CACHE.clear()
         runner = _CACHE[key] = _Runner(task.env, task.policy)
     return runner.run(task)
-
-
-def _mp_context() -> multiprocessing.context.BaseContext:
-    if sys.platform.startswith("linux") and "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["envs.runner", "envs.rollout"])  # imports once (no torch: not fork-safe)
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def run_tasks(tasks: Sequence[EpisodeTask], workers: int = 1, backend: str = "local",
-              address: str | None = None) -> Iterator[tuple[int, dict[str, Any]]]:
-    """Run the tasks, yielding (index into `tasks`, result) as each finishes (order not guaranteed).
-
-    backend "local": `workers` processes (1: this process); "ray": Ray tasks on the cluster at `address`
-    ("auto", "HOST:PORT") or, with None, a local Ray instance of `workers` CPUs. An error that is not a
-    policy's (e.g. an env that cannot be built) stops the run and is raised.
-    """
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
-    if backend == "ray":
-        from envs.ray_backend import run_on_ray
-
-        yield from run_on_ray(tasks, workers, address)
-    elif workers <= 1 or len(tasks) <= 1:
-        for i, task in enumerate(tasks):
-            yield i, run_task(task)
-    else:
-        with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=_mp_context()) as pool:
-            futures = {pool.submit(run_task, task): i for i, task in enumerate(tasks)}
-            pending = set(futures)
-            try:
-                while pending:
-                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        yield futures[fut], fut.result()
-            finally:
-                for fut in pending:
-                    fut.cancel()

@@ -1,6 +1,6 @@
 """The weight files a policy config loads, and one digest of their bytes for episode fingerprints.
 
-A benchmark or evaluation folder resumes by fingerprint (`envs.runner.fingerprint`). The policy config names
+A benchmark or evaluation folder resumes by fingerprint (`envs.evaluation.episode.fingerprint`). The policy config names
 its predictor or agent, but a name is not its weights: retraining `gpgraph-stgcnn-synthetic` or re-packaging
 `ppo-crowdnav` keeps the name. The digest of the files behind the names goes into the fingerprint, so records
 made with other weights are refused on resume instead of being mixed silently into a new leaderboard.
@@ -12,8 +12,8 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
-from envs.plugins import SB3_PREFIX, is_plugin, parse_sb3
 from envs.policies import AGENTS_DIR, DEFAULT_PREDICTOR, POLICIES, PREDICTOR_POLICIES, PolicyConfig
+from envs.policies.plugins import SB3_PREFIX, is_plugin, parse_sb3
 from predictor.checkpoints import checkpoint_file  # torch-free
 
 

@@ -1,9 +1,9 @@
 """`run_benchmark`: every policy on every episode of a suite's cells, resumable, then the leaderboard.
 
-Records go to `<out>/records.jsonl` as episodes finish (`envs.records.RecordStore`); a rerun with the same
+Records go to `<out>/records.jsonl` as episodes finish (`envs.evaluation.records.RecordStore`); a rerun with the same
 `--out` skips the episodes already recorded (a killed run resumes), and `merge` adds record files made
 elsewhere (another machine, a Ray cluster). The leaderboard and the paired comparisons are rebuilt from all
-records at the end (`envs.leaderboard`).
+records at the end (`envs.evaluation.leaderboard`).
 """
 
 from __future__ import annotations
@@ -14,13 +14,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from envs.artifacts import policy_identity
 from envs.atomic import check_writable_dir
-from envs.evaluate import check_setup
+from envs.evaluation.episode import EpisodeTask, fingerprint
+from envs.evaluation.evaluate import check_setup
+from envs.evaluation.pool import run_tasks
+from envs.evaluation.records import EpisodeRecord, RecordStore, merge_records, read_records
+from envs.evaluation.suite import DEFAULT_DATA, Cell, Suite
 from envs.policies import PolicyConfig
-from envs.records import EpisodeRecord, RecordStore, merge_records, read_records
-from envs.runner import EpisodeTask, fingerprint, run_tasks
-from envs.suite import DEFAULT_DATA, Cell, Suite
+from envs.policies.identity import policy_identity
 
 RECORDS = "records.jsonl"
 
@@ -36,7 +37,7 @@ class BenchmarkPlan:
 
 def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig, identity: list[Any] | None = None) -> str:
     """What an episode's record depends on: the suite version, the cell's definition, the policy config and the
-    digest of the weight files it loads (`envs.artifacts.policy_identity`, or `identity` when already known)."""
+    digest of the weight files it loads (`envs.policies.identity.policy_identity`, or `identity` when already known)."""
     return fingerprint(suite.name, suite.version, cell.spec, cell.defaults,
                        *(policy_identity(policy) if identity is None else identity))
 
@@ -75,10 +76,10 @@ def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Policy
                   data: Path = DEFAULT_DATA, workers: int = 1, backend: str = "local", address: str | None = None,
                   merge: Sequence[Path] = (), progress: bool = True) -> dict[str, Any]:
     """Run what is missing, then write the leaderboard from every record of the selection. Returns the
-    leaderboard JSON (see `envs.leaderboard.leaderboard`) with `run` (episodes run / resumed, wall time)."""
+    leaderboard JSON (see `envs.evaluation.leaderboard.leaderboard`) with `run` (episodes run / resumed, wall time)."""
     from tqdm.auto import tqdm
 
-    from envs.leaderboard import leaderboard, write_leaderboard
+    from envs.evaluation.leaderboard import leaderboard, write_leaderboard
 
     out = check_writable_dir(out)
     suite.check_data(list(cells), data)

@@ -1,10 +1,10 @@
 """`evaluate`: one policy over a fixed list of episode seeds in one env config, summarised and reported.
 
 Episodes use seeds seed, seed + 1, ..., seed + episodes - 1 (the env's `reset(seed)` fixes the crowd and the
-robot's route, so every policy meets the same episodes) and run through `envs.runner` (local process pool by
+robot's route, so every policy meets the same episodes) and run through `envs.evaluation.pool` (local process pool by
 default, or Ray). Outputs in `out_dir`: `<stem>.json` (the returned summary), `<stem>.md`, `<stem>.png`
 (rates and example trajectories) and `<stem>_seed<S>.rrd` for the first `record` episodes. Metric
-definitions: the README's "Evaluation metrics (envs)" and `envs.stats.aggregate`.
+definitions: the README's "Evaluation metrics (envs)" and `envs.evaluation.stats.aggregate`.
 """
 
 from __future__ import annotations
@@ -13,14 +13,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from envs.artifacts import policy_identity
 from envs.atomic import check_writable_dir, write_json_atomic, write_text_atomic
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from envs.evaluation.episode import EpisodeTask, fingerprint
+from envs.evaluation.pool import run_tasks
+from envs.evaluation.records import EpisodeRecord
+from envs.evaluation.report import N_DRAWN, markdown_table, plot_result
+from envs.evaluation.stats import aggregate
 from envs.policies import PolicyConfig
-from envs.records import EpisodeRecord
-from envs.report import N_DRAWN, markdown_table, plot_result
-from envs.runner import EpisodeTask, fingerprint, run_tasks
-from envs.stats import aggregate
+from envs.policies.identity import policy_identity
 
 
 def config_summary(config: CrowdNavConfig) -> dict[str, Any]:
@@ -71,10 +72,10 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
         stem: file name stem of the outputs (default: the policy name).
         draw: episodes drawn in the PNG's trajectories panels (the first ones).
         progress: show a tqdm bar over episodes (on stderr).
-        backend, address: `envs.runner.run_tasks`.
+        backend, address: `envs.evaluation.pool.run_tasks`.
         check: build the env and policy once first (`check_setup`); False when the caller already did.
 
-    Returns the JSON-ready summary (`envs.stats.aggregate` plus policy, policy_config, scenario, seed, config,
+    Returns the JSON-ready summary (`stats.aggregate` plus policy, policy_config, scenario, seed, config,
     episode_list and run: workers, backend, wall time, files written).
     """
     from tqdm.auto import tqdm
@@ -90,7 +91,7 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(seed, seed + episodes))
-    fp = fingerprint(config_summary(config), *policy_identity(pcfg))  # with the weights' digest (envs.artifacts)
+    fp = fingerprint(config_summary(config), *policy_identity(pcfg))  # with the weights' digest
     tasks = [EpisodeTask(config, pcfg, s, fingerprint=fp, keep_scene=out is not None and i < draw,
                          rrd_path=str(out / f"{stem}_seed{s}.rrd") if out is not None and i < record else None,
                          error_dir=str(out / "errors") if out is not None else None)

@@ -5,7 +5,7 @@ and the weights as `.pth` files. Here nothing pickled is ever loaded:
 - settings that would be unpickled are replaced: the spaces by the env's, schedules by constants, and
   `policy_kwargs` rebuilt from its readable fields, with classes only from an allow-list (`ALLOWED_CLASSES`);
 - the weights load with `torch.load(weights_only=True)` (SB3's loader);
-- agents saved here carry `crowdnav.json` (the env's observation signature, `envs.obs_layout.signature`, and
+- agents saved here carry `crowdnav.json` (the env's observation signature, `envs.observation.signature`, and
   training metadata); an agent whose signature differs from the env's is refused with the mismatch named. For
   other SB3 files the keys and shapes are read from the readable copy of the observation space.
 """
@@ -23,7 +23,7 @@ from typing import Any
 
 from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
-from envs.obs_layout import mismatches, signature
+from envs.observation import mismatches, signature
 
 LAYOUT_ENTRY = "crowdnav.json"
 SB3_ALGOS = ("PPO", "A2C", "SAC", "TD3", "DDPG")
@@ -36,7 +36,9 @@ _SAFE_REPLACEMENTS: dict[str, Any] = {
     "_last_original_obs": None, "_episode_storage": None,
 }
 ALLOWED_CLASSES = {  # readable class names in policy_kwargs -> (module, attribute)
-    "<class 'envs.extractor.CrowdAttentionExtractor'>": ("envs.extractor", "CrowdAttentionExtractor"),
+    "<class 'envs.rl.extractor.CrowdAttentionExtractor'>": ("envs.rl.extractor", "CrowdAttentionExtractor"),
+    # agents saved before envs/ became four rooms (the packaged ppo-crowdnav among them) name its old module
+    "<class 'envs.extractor.CrowdAttentionExtractor'>": ("envs.rl.extractor", "CrowdAttentionExtractor"),
     **{f"<class 'torch.nn.modules.activation.{n}'>": ("torch.nn", n) for n in ("ReLU", "Tanh", "ELU", "GELU", "SiLU")},
     "<class 'torch.optim.adam.Adam'>": ("torch.optim", "Adam"),
 }

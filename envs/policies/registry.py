@@ -7,10 +7,10 @@ Registry names:
     mpc-none      MPC with pedestrians frozen where they stand (no prediction), no groups
     social-force  reactive social-force robot (every env step)
     random        uniform random actions (a baseline and a benchmark load)
-    ppo-crowdnav  the shipped PPO agent (`envs/agents/ppo-crowdnav.zip`, trained with `envs.train`: circle
+    ppo-crowdnav  the shipped PPO agent (`envs/policies/agents/ppo-crowdnav.zip`, trained with `envs.rl.train`: circle
                   crossing, 5 pedestrians who do not see the robot; RESULTS.md "RL baseline")
 
-Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.plugins`) or `sb3:PATH.zip`
+Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.policies.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
 Planner policies read the env through its typed `PlannerView`; they re-plan every `replan_every_steps` env
 steps from a history of 0.4 s-spaced positions that ends now and hold the planned control in between (the env
@@ -27,7 +27,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from envs.env import CrowdNavEnv, PlannerView
-from envs.plugins import SB3_PREFIX, SB3Policy, is_plugin, load_factory
+from envs.policies.plugins import SB3_PREFIX, SB3Policy, is_plugin, load_factory
 from envs.timing import PredictionTiming
 from planner import (
     CROWD_MPC,
@@ -235,7 +235,7 @@ def _planner(name: str, planner_cls: type, every: int | None = None) -> Factory:
 
 
 def _agent(name: str) -> Factory:
-    """A packaged SB3 agent (envs/agents/NAME.zip), loaded like `sb3:PATH.zip` and renamed."""
+    """A packaged SB3 agent (envs/policies/agents/NAME.zip), loaded like `sb3:PATH.zip` and renamed."""
     def build(cfg: PolicyConfig, mpc: MPCConfig, env: CrowdNavEnv) -> Policy:
         path = AGENTS_DIR / f"{name}.zip"
         if not path.is_file():

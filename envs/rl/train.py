@@ -1,12 +1,12 @@
-"""Train a PPO agent on `crowdnav/CrowdNav-v0`: `python -m envs.train` or `crowdnav train`.
+"""Train a PPO agent on `crowdnav/CrowdNav-v0`: `python -m envs.rl.train` or `crowdnav train`.
 
     crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --steps 1000000 --out out/train/cc5
     crowdnav train --config run.toml --warm-start bc          # flags override the file's values
     crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint
 
 It reads top to bottom: the settings (`TrainConfig`), the vectorised envs, the SB3 PPO model with the
-set-aware extractor (`envs.extractor`), an optional warm start by behaviour cloning of the MPC
-(`envs.imitation`), then `learn` with one callback (`envs.train_monitor`) that prints steps/s and an ETA,
+set-aware extractor (`envs.rl.extractor`), an optional warm start by behaviour cloning of the MPC
+(`envs.rl.imitation`), then `learn` with one callback (`envs.rl.monitor`) that prints steps/s and an ETA,
 evaluates the deterministic agent with the harness metrics every `eval_every_steps` on seeds it never trained
 on, and saves checkpoints atomically. Out folder: config.json, progress.csv + tb/ (SB3's logger: CSV and
 TensorBoard), eval.csv, demos.npz, checkpoints/{latest,best}.zip (+ state.json), final.zip.
@@ -143,7 +143,7 @@ def make_vec_env(cfg: TrainConfig) -> Any:
 def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
     from stable_baselines3 import PPO
 
-    from envs.extractor import CrowdAttentionExtractor
+    from envs.rl.extractor import CrowdAttentionExtractor
 
     policy_kwargs = {"features_extractor_class": CrowdAttentionExtractor,
                      "features_extractor_kwargs": {"use_groups": cfg.groups, "use_predictions": cfg.predictions},
@@ -158,7 +158,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     """Behaviour cloning of the demo policy (demos from `demos_path`, or collected and saved to out/demos.npz),
     then for "dagger" `dagger_rounds` rounds of learner roll-outs labelled by the expert (seeds after the
     demos' own) and cloning on the aggregate (saved to out/dagger.npz)."""
-    from envs.imitation import Demos, behaviour_clone, collect_demos, concat
+    from envs.rl.imitation import Demos, behaviour_clone, collect_demos, concat
 
     start, workers = time.perf_counter(), min(max(2, cfg.workers), os.cpu_count() or 2)
     if demos_path is not None:
@@ -193,7 +193,7 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
     """Run (or resume) training into `out`; 0 on completion, 1 when training diverged."""
     from stable_baselines3.common.logger import configure
 
-    from envs.train_monitor import Diverged, TrainMonitor, load_checkpoint, tensorboard_available
+    from envs.rl.monitor import Diverged, TrainMonitor, load_checkpoint, tensorboard_available
     from predictor import set_threads
 
     set_threads(cfg.threads)
@@ -231,8 +231,8 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
 
 def check_demos(path: Path, cfg: TrainConfig) -> None:
     """ValueError unless `path` holds demonstrations recorded in this run's observation layout."""
-    from envs.imitation import Demos
     from envs.observation import observation_space
+    from envs.rl.imitation import Demos
 
     demos = Demos.load(path)
     space = observation_space(cfg.env_config())

@@ -1,6 +1,6 @@
 """Collision attribution: who moved into whom at the moment of contact.
 
-Three kinds (`envs.records.COLLISION_KINDS`), decided from the step on which contact is first detected:
+Three kinds (`envs.evaluation.records.COLLISION_KINDS`), decided from the step on which contact is first detected:
 
     spawn       the pedestrian was not in the scene at the step's start (its track began within contact
                 distance of the robot), or its replayed track began less than `SPAWN_WINDOW_S` before the

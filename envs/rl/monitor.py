@@ -1,4 +1,4 @@
-"""The training callback of `envs.train`: progress with steps/s and ETA, periodic evaluation with the harness
+"""The training callback of `envs.rl.train`: progress with steps/s and ETA, periodic evaluation with the harness
 metrics, atomic checkpoints, resume, and a stop (keeping the last good checkpoint) when training diverges."""
 
 from __future__ import annotations
@@ -15,10 +15,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from envs.atomic import write_json_atomic
 from envs.env import CrowdNavEnv
-from envs.rollout import run_episode
-from envs.runner import episode_record
-from envs.sb3_io import load_parameters, save_agent
-from envs.stats import aggregate
+from envs.evaluation.episode import episode_record, run_episode
+from envs.evaluation.stats import aggregate
+from envs.policies.sb3_files import load_parameters, save_agent
 
 EVAL_FIELDS = ("steps", "wall_s", "success", "collision", "timeout", "mean_return", "time_to_goal_s",
                "intrusion", "min_distance_m")
@@ -107,7 +106,7 @@ class TrainMonitor(BaseCallback):
         seeds = range(self.cfg.eval_seed, self.cfg.eval_seed + self.cfg.eval_episodes)
         records = [episode_record(run_episode(self.env_config, "", s, env=self.eval_env, policy=policy), policy.name, s)
                    for s in seeds]
-        summary = aggregate(records)  # the harness's own definitions (envs.stats)
+        summary = aggregate(records)  # the harness's own definitions (envs.evaluation.stats)
         keys = {"success": "success_rate", "collision": "collision_rate", "timeout": "timeout_rate",
                 "mean_return": "mean_return", "time_to_goal_s": "time_to_goal_s", "intrusion": "group_intrusion_rate",
                 "min_distance_m": "min_distance_m"}

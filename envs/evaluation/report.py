@@ -2,7 +2,7 @@
 
 `markdown_table(result)` and `plot_result(result, scenes, path)` describe one policy's evaluation;
 `compare(results)`, `compare_png(results, path)` and `compare_json(results)` put several side by side. The
-benchmark's leaderboard has its own module (`envs.leaderboard`).
+benchmark's leaderboard has its own module (`envs.evaluation.leaderboard`).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ Protocols (also in the README):
                 `samples` (K, pred_len, N, 2) m and `group_id` (N,); optional attributes step_s, obs_len, pred_len
                 (default 0.4 s, 8, 12). A predictor factory is called with no arguments.
 
-SB3 agents load without unpickling Python objects from the file (`envs.sb3_io`): pickled settings are replaced
+SB3 agents load without unpickling Python objects from the file (`sb3_files`): pickled settings are replaced
 (spaces by the env's, schedules by constants, policy_kwargs rebuilt with allow-listed classes), the weights load
 with `weights_only=True`, and an agent trained on another observation layout is refused with the mismatch named.
 """
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.sb3_io import SB3_ALGOS, load_agent
+from envs.policies.sb3_files import SB3_ALGOS, load_agent
 
 PLUGIN_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 SB3_PREFIX = "sb3:"

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.records import COLLISION_KINDS, EpisodeRecord, finite_or_none
+from envs.evaluation.records import COLLISION_KINDS, EpisodeRecord, finite_or_none
 
 Z95 = 1.959963984540054  # two-sided 95% normal quantile
 ALPHA = 0.05

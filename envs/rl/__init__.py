@@ -1,0 +1,9 @@
+"""The RL room: training agents on the env (the `rl` extra: stable-baselines3).
+
+- `train`: `crowdnav train` (PPO, optional DAgger/behaviour-cloning warm start, resumable);
+- `monitor`: progress, evaluation and checkpoints during training;
+- `imitation`: expert demonstrations and behaviour cloning;
+- `extractor`: the set-aware features extractor (attention over pedestrians).
+
+It may import every other room of `envs`; nothing outside it imports it except `envs.cli`.
+"""
