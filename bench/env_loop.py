@@ -19,7 +19,7 @@ import numpy as np
 
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
-from envs.policies import GPGraphPolicy, make_policy
+from envs.policies import GPGraphPolicy, act, make_policy
 from planner import MPCConfig
 
 FALLBACK_PREDICTOR = "gpgraph-stgcnn-univ"
@@ -79,26 +79,26 @@ def bench_policy(name: str, n: int, seeds: list[int], time_limit_s: float) -> di
     if hasattr(policy, "predictor"):
         timers.wrap(policy.predictor, "predict", "model")
     # warm-up (first solve, first model call), untimed
-    obs, _ = env.reset(seed=10_000)
-    policy.reset(env, 10_000)
+    env.reset(seed=10_000)
+    policy.reset(10_000)
     for _ in range(8):
-        obs, _, term, trunc, _ = env.step(policy.act(obs, env))
+        _, _, term, trunc, _ = env.step(act(policy, env))
         if term or trunc:
             break
     steps, wall, cpu = 0, 0.0, 0.0
     per_step: list[tuple[int, dict[str, float]]] = []  # (step index in episode, times s)
     outcomes = {"success": 0, "collision": 0, "timeout": 0}
     for seed in seeds:
-        obs, _ = env.reset(seed=seed)
-        policy.reset(env, seed)
+        env.reset(seed=seed)
+        policy.reset(seed)
         timers.take()
         done, k, info = False, 0, {}
         w0, c0 = _clocks()
         while not done:
             t0 = time.perf_counter()
-            action = policy.act(obs, env)
+            action = act(policy, env)
             t1 = time.perf_counter()
-            obs, _, term, trunc, info = env.step(action)
+            _, _, term, trunc, info = env.step(action)
             t2 = time.perf_counter()
             done = term or trunc
             times = timers.take()

@@ -41,7 +41,7 @@ def _env(scenario: str):
 
 
 def soak_policy(name: str, steps: int) -> dict:
-    from envs.policies import make_policy
+    from envs.policies import act, make_policy
 
     envs = {s: _env(s) for s in SCENARIOS}
     policies = {s: make_policy(name, env) for s, env in envs.items()}
@@ -50,13 +50,13 @@ def soak_policy(name: str, steps: int) -> dict:
     while done < steps:
         scenario = SCENARIOS[episodes % len(SCENARIOS)]
         env, policy = envs[scenario], policies[scenario]
-        obs, _ = env.reset(seed=episodes)
-        policy.reset(env, episodes)
+        env.reset(seed=episodes)
+        policy.reset(episodes)
         episodes += 1
         end = False
         while not end and done < steps:
             try:
-                obs, _, term, trunc, _ = env.step(policy.act(obs, env))
+                _, _, term, trunc, _ = env.step(act(policy, env))
             except Exception:  # counted (the soak target is zero) and shown
                 errors += 1
                 traceback.print_exc()

@@ -15,7 +15,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -33,40 +33,9 @@ from envs.kernels import intruded_groups, step_distances
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
 from envs.rewards import StepFacts, reward_terms, weighted
-from envs.timing import DEFAULT_TIMING, PredictionTiming
-from planner import RobotConfig, clip_control, model_dims, step_robot
-
-
-@dataclass(frozen=True)
-class Pedestrians:
-    """The pedestrians in the scene now: pos (N, 2) m, vel (N, 2) m/s, radius (N,) m, group_id (N,)
-    ground truth 0..G-1, ped_id (N,)."""
-
-    pos: np.ndarray
-    vel: np.ndarray
-    radius: np.ndarray
-    group_id: np.ndarray
-    ped_id: np.ndarray
-
-
-@dataclass(frozen=True)
-class PlannerView:
-    """What a planner-based policy may read of the env at one step (copies; arrays in m, m/s, rad).
-
-    robot_state: (nz,) the planner's state (unicycle x, y, heading, v, omega; holonomic x, y, vx, vy).
-    goal: (2,). robot: the robot's `RobotConfig`. pedestrians: those in the scene now.
-    history: (obs_len, N, 2) their positions `timing.step_s` apart, the last row now (rows of `pedestrians`).
-    walls: (W, 4) wall segments x0, y0, x1, y1. timing: the prediction timing. dt_s: the env step, s.
-    """
-
-    robot_state: np.ndarray
-    goal: np.ndarray
-    robot: RobotConfig
-    pedestrians: Pedestrians
-    history: np.ndarray
-    walls: np.ndarray
-    timing: PredictionTiming
-    dt_s: float
+from envs.timing import DEFAULT_TIMING
+from envs.view import Decision, Pedestrians, PolicyView
+from planner import clip_control, model_dims, step_robot
 
 
 def make_crowd(cfg: CrowdNavConfig) -> Crowd:
@@ -118,6 +87,7 @@ class CrowdNavEnv(gym.Env):
         self._pred_groups: np.ndarray | None = None
         self._walls = WallIndex(self.crowd.walls)  # the walls never change: precomputed for the per-step check
         self._peds_cache: tuple[CrowdState | None, Pedestrians | None] = (None, None)
+        self._obs: dict[str, np.ndarray] = {}
 
     # ------------------------------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
@@ -149,7 +119,8 @@ class CrowdNavEnv(gym.Env):
         self._done = False
         self._annotations = {}
         self._update_prediction()
-        return self._observe(), {"goal_distance_m": self._goal_distance()}
+        self._obs = self._observe()
+        return self._obs, {"goal_distance_m": self._goal_distance()}
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
         if self._done:
@@ -171,7 +142,7 @@ class CrowdNavEnv(gym.Env):
         if self.is_planning_tick:
             self._record_tick()
             self._update_prediction()
-        obs = self._observe()
+        obs = self._obs = self._observe()
         # 4. rewards
         facts = self._facts(before_pos, before, dist_before)
         terms = weighted(reward_terms(facts, cfg), cfg)
@@ -218,11 +189,17 @@ class CrowdNavEnv(gym.Env):
             self._peds_cache = (self._state, peds)
         return peds
 
-    def planner_view(self) -> PlannerView:
-        """The typed view planner-based policies read (see `PlannerView`)."""
-        return PlannerView(self.robot_state.copy(), self.goal.copy(), self.config.robot, self.pedestrians(),
-                           self.history_window(), np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing,
-                           self.config.dt_s)
+    def view(self) -> PolicyView:
+        """What a policy reads now (`envs.view.PolicyView`): the last observation and the typed scene, copies."""
+        if not self._obs:
+            raise RuntimeError("view() before reset()")
+        return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),
+                          self.config.robot, self.pedestrians(), self.history_window(),
+                          np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s)
+
+    def action_for(self, decision: Decision) -> np.ndarray:
+        """The action (2,) float32 a policy's decision asks for: its action, or the action of its control."""
+        return decision.action if decision.action is not None else self.control_to_action(decision.control)
 
     def history_window(self) -> np.ndarray:
         """(obs_len = 8, N, 2) m positions of `pedestrians()` 0.4 s apart, the last row being now. On a 0.4 s tick the
@@ -385,7 +362,7 @@ class CrowdNavEnv(gym.Env):
         if facts.collided:
             m.collision, m.collision_time_s = True, m.time_s
             m.collision_with = "wall" if facts.hit_wall and facts.min_surface_distance_m >= 0 else "pedestrian"
-            m.collision_kind = self._collision_kind() if m.collision_with == "pedestrian" else "robot"
+            m.at_fault = self._collision_kind() if m.collision_with == "pedestrian" else "robot"
         elif facts.reached_goal:
             m.success, m.time_to_goal_s = True, m.time_s
         elif truncated:

@@ -24,7 +24,7 @@ import numpy as np
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.evaluation.records import EpisodeRecord, finite_or_none
-from envs.policies import PolicyConfig, make_policy
+from envs.policies import PolicyConfig, act, make_policy
 
 
 @dataclass
@@ -56,21 +56,21 @@ def run_episode(config: CrowdNavConfig, policy_spec: str | PolicyConfig, seed: i
     start = time.perf_counter()
     env = env or CrowdNavEnv(config)
     policy = policy or make_policy(policy_spec, env)
-    obs, _ = env.reset(seed=seed)
-    policy.reset(env, seed)
+    env.reset(seed=seed)
+    policy.reset(seed)
     calls0, fallbacks0, times0 = _counts(policy)
     robot, ret, done, info = [env.robot_state[:2].copy()], 0.0, False, {}
     peds, groups = [], []
     scalars: dict[str, float] = {}
     while not done:
-        action = policy.act(obs, env)
+        action = act(policy, env)
         if observer is not None:
             observer.log(env.frame(scalars))
         if keep_scene:
             p = env.pedestrians()
             peds.append(p.pos.copy())
             groups.append(p.group_id.copy())
-        obs, reward, terminated, truncated, info = env.step(action)
+        _, reward, terminated, truncated, info = env.step(action)
         robot.append(env.robot_state[:2].copy())
         ret += reward
         done = terminated or truncated
@@ -126,7 +126,7 @@ def episode_record(result: Any, policy_name: str, seed: int, cell: str = "", fin
     m = result.metrics
     return EpisodeRecord(
         policy=policy_name, seed=int(seed), outcome=m["outcome"], cell=cell,
-        collision_with=m["collision_with"] or None, collision_kind=m["collision_kind"] or None,
+        collision_with=m["collision_with"] or None, at_fault=m["at_fault"] or None,
         collision_time_s=finite_or_none(m["collision_time_s"]), steps=int(m["steps"]), time_s=float(m["time_s"]),
         time_to_goal_s=finite_or_none(m["time_to_goal_s"]), path_length_m=float(m["path_length_m"]),
         min_distance_m=finite_or_none(m["min_distance_m"]), discomfort_frequency=float(m["discomfort_frequency"]),

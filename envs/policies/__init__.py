@@ -1,6 +1,7 @@
 """The policies room: what drives the robot.
 
-- `registry`: `PolicyConfig` -> `make_policy`, the registry `POLICIES` and the planner-based policies;
+- `registry`: `PolicyConfig` -> `make_policy`, the registry `POLICIES`, the planner-based policies and `act`,
+  the one step of the episode loop (view -> `policy.act(view)` -> decision -> env action);
 - `plugins`: user policies (`module:factory`) and stable-baselines3 agents (`sb3:PATH.zip`);
 - `sb3_files`: SB3 agent files saved and loaded without unpickling, with the env's observation layout;
 - `identity`: what identifies a policy's weights in results (fingerprints for resuming);
@@ -18,10 +19,12 @@ from envs.policies.registry import (
     REPLAN_EVERY_STEPS,
     SCENE_TEMPLATE,
     GPGraphPolicy,
+    LegacyPolicy,
     PlannerPolicy,
     Policy,
     PolicyConfig,
     RandomPolicy,
+    act,
     load_predictor_spec,
     make_policy,
     singleton_prediction,
@@ -29,6 +32,6 @@ from envs.policies.registry import (
 
 __all__ = [
     "AGENTS_DIR", "DEFAULT_PREDICTOR", "ENV_MPC", "POLICIES", "PREDICTOR_POLICIES", "REPLAN_EVERY_STEPS",
-    "SCENE_TEMPLATE", "GPGraphPolicy", "PlannerPolicy", "Policy", "PolicyConfig", "RandomPolicy",
-    "load_predictor_spec", "make_policy", "singleton_prediction",
+    "SCENE_TEMPLATE", "GPGraphPolicy", "LegacyPolicy", "PlannerPolicy", "Policy", "PolicyConfig", "RandomPolicy",
+    "act", "load_predictor_spec", "make_policy", "singleton_prediction",
 ]

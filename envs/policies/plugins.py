@@ -2,9 +2,12 @@
 
 Protocols (also in the README):
 
-    Policy      name: str; reset(env, seed) -> None; act(obs, env) -> action (2,) in [-1, 1];
+    Policy      name: str; reset(seed) -> None; act(view: envs.view.PolicyView) -> envs.view.Decision;
                 optional `stats` (a `planner.PlanStats`) for plan/fallback/solve-time counts.
-                A policy factory is called as factory(config: PolicyConfig, env: CrowdNavEnv).
+                A policy factory is called as factory(config: PolicyConfig, env: CrowdNavEnv): it may read the
+                env's settings there (config, spaces), but `act` sees only the view. A policy of the old
+                protocol (`reset(env, seed)`, `act(obs, env) -> action`) still runs, with a DeprecationWarning
+                (`envs.policies.registry.LegacyPolicy`).
     Predictor   predict(history (obs_len, N, 2) m, n_samples: int, rng: np.random.Generator) -> an object with
                 `samples` (K, pred_len, N, 2) m and `group_id` (N,); optional attributes step_s, obs_len, pred_len
                 (default 0.4 s, 8, 12). A predictor factory is called with no arguments.
@@ -24,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from envs.policies.sb3_files import SB3_ALGOS, load_agent
+from envs.view import Decision, PolicyView
 
 PLUGIN_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 SB3_PREFIX = "sb3:"
@@ -80,9 +84,9 @@ class SB3Policy:
         except (ValueError, RuntimeError, KeyError) as exc:
             raise ValueError(f"{path}: the agent does not fit this env's observation space ({exc})") from exc
 
-    def reset(self, env: Any, seed: int | None = None) -> None:
+    def reset(self, seed: int | None = None) -> None:
         pass
 
-    def act(self, obs: dict[str, np.ndarray], env: Any) -> np.ndarray:
-        action, _ = self.model.predict(obs, deterministic=self.deterministic)
-        return np.asarray(action, np.float32).reshape(2)
+    def act(self, view: PolicyView) -> Decision:
+        action, _ = self.model.predict(view.obs, deterministic=self.deterministic)
+        return Decision(action=np.asarray(action, np.float32).reshape(2))

@@ -12,13 +12,17 @@ Registry names:
 
 Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.policies.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
-Planner policies read the env through its typed `PlannerView`; they re-plan every `replan_every_steps` env
+Every policy reads a `PolicyView` and returns a `Decision` (`envs.view`): `act(view) -> Decision`; it never
+calls back into the env. `act(policy, env)` below is the one loop step that asks the env for the view, applies
+the decision's annotations and returns the env action. Planner policies re-plan every `replan_every_steps` env
 steps from a history of 0.4 s-spaced positions that ends now and hold the planned control in between (the env
 clips it to the accelerations reachable per env step).
 """
 
 from __future__ import annotations
 
+import inspect
+import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -26,9 +30,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from envs.env import CrowdNavEnv, PlannerView
+from envs.env import CrowdNavEnv
 from envs.policies.plugins import SB3_PREFIX, SB3Policy, is_plugin, load_factory
 from envs.timing import PredictionTiming
+from envs.view import Decision, PolicyView
 from planner import (
     CROWD_MPC,
     ConstantVelocityMPC,
@@ -118,21 +123,30 @@ def _json_safe(obj: Any) -> Any:
 
 
 class Policy(Protocol):
-    """What the env's runners need of a policy (`stats` is optional)."""
+    """What the episode loop needs of a policy (`stats`, a `planner.PlanStats`, is optional)."""
 
     name: str
 
-    def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
+    def reset(self, seed: int | None = None) -> None:
         """Start an episode (after env.reset)."""
 
-    def act(self, obs: dict[str, np.ndarray], env: CrowdNavEnv) -> np.ndarray:
-        """The action (2,) float32 in [-1, 1] for the current step."""
+    def act(self, view: PolicyView) -> Decision:
+        """The decision for the current step, from the view alone."""
+
+
+def act(policy: Policy, env: CrowdNavEnv) -> np.ndarray:
+    """One step of the episode loop: the policy's decision on the env's view, its annotations attached to the
+    frames drawn from now on, and the env action (2,) float32 it asks for."""
+    decision = policy.act(env.view())
+    if decision.annotated:
+        env.annotate(decision.plan, decision.predictions, decision.predicted_group_id)
+    return env.action_for(decision)
 
 
 class PlannerPolicy:
     """A planner re-planning every `replan_every_steps` env steps; `predict(view)` builds the `PedPrediction`."""
 
-    def __init__(self, name: str, planner: Any, predict: Callable[[PlannerView], PedPrediction],
+    def __init__(self, name: str, planner: Any, predict: Callable[[PolicyView], PedPrediction],
                  replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
         if replan_every_steps < 1:
             raise ValueError(f"replan_every_steps must be >= 1, got {replan_every_steps}")
@@ -145,22 +159,21 @@ class PlannerPolicy:
     def stats(self) -> PlanStats:
         return self.planner.stats
 
-    def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
+    def reset(self, seed: int | None = None) -> None:
         self.planner.reset()
         self._control = None
 
-    def act(self, obs: dict[str, np.ndarray] | None, env: CrowdNavEnv) -> np.ndarray:
-        if self._control is None or self._age >= self.replan_every_steps:
-            self._age = 0
-            view = env.planner_view()
-            prediction = self._predict(view)
-            result = self.planner.plan(view.robot_state, view.goal, prediction, view.walls)
-            self._control = result.control
-            samples = prediction.positions if prediction.n_peds else None
-            env.annotate(plan=result.states[:, :2], predictions=samples,
-                         predicted_group_id=prediction.group_ids if prediction.n_peds else None)
-        self._age += 1
-        return env.control_to_action(self._control)
+    def act(self, view: PolicyView) -> Decision:
+        if self._control is not None and self._age < self.replan_every_steps:
+            self._age += 1
+            return Decision(control=self._control)  # hold the plan; the frames keep its annotations
+        self._age = 1
+        prediction = self._predict(view)
+        result = self.planner.plan(view.robot_state, view.goal, prediction, view.walls)
+        self._control = result.control
+        samples = prediction.positions if prediction.n_peds else None
+        return Decision(control=self._control, plan=result.states[:, :2], predictions=samples,
+                        predicted_group_id=prediction.group_ids if prediction.n_peds else None)
 
 
 def load_predictor_spec(spec: str | None, threads: int = 1) -> Any:
@@ -177,19 +190,21 @@ class GPGraphPolicy(PlannerPolicy):
     """MPC + a predictor's samples and group assignment (GP-Graph by default)."""
 
     def __init__(self, config: MPCConfig, predictor: str | None = DEFAULT_PREDICTOR, n_samples: int = 20,
-                 threads: int = 1, replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
+                 threads: int = 1, replan_every_steps: int = REPLAN_EVERY_STEPS,
+                 env_timing: PredictionTiming | None = None) -> None:
         self.predictor = load_predictor_spec(predictor, threads)
         self.timing = PredictionTiming.of(self.predictor)
+        if env_timing is not None:  # the env's history and the predictor's must be the same grid
+            env_timing.check_matches(self.timing, "the predictor")
         self.n_samples = n_samples
         self.rng = np.random.default_rng(0)
         super().__init__("mpc-gpgraph", MPCPlanner(config), self._gpgraph, replan_every_steps)
 
-    def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
-        env.timing.check_matches(self.timing, "the predictor")
-        super().reset(env, seed)
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
         self.rng = np.random.default_rng(seed)
 
-    def _gpgraph(self, view: PlannerView) -> PedPrediction:
+    def _gpgraph(self, view: PolicyView) -> PedPrediction:
         p = view.pedestrians
         if len(p.pos) == 0:
             return empty_prediction(view.timing.pred_len, view.timing.step_s)
@@ -198,7 +213,7 @@ class GPGraphPolicy(PlannerPolicy):
                              current=p.pos, history=view.history, step_s=view.timing.step_s)
 
 
-def singleton_prediction(view: PlannerView) -> PedPrediction:
+def singleton_prediction(view: PolicyView) -> PedPrediction:
     """The observed history as a (placeholder) prediction with every pedestrian its own group; the
     baseline planners replace the positions (constant velocity, frozen)."""
     p, t = view.pedestrians, view.timing
@@ -218,11 +233,11 @@ class RandomPolicy:
         self.stats = PlanStats()
         self.rng = np.random.default_rng(0)
 
-    def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
+    def reset(self, seed: int | None = None) -> None:
         self.rng = np.random.default_rng(seed)
 
-    def act(self, obs: dict[str, np.ndarray] | None, env: CrowdNavEnv) -> np.ndarray:
-        return self.rng.uniform(-1.0, 1.0, 2).astype(np.float32)
+    def act(self, view: PolicyView) -> Decision:
+        return Decision(action=self.rng.uniform(-1.0, 1.0, 2).astype(np.float32))
 
 
 Factory = Callable[[PolicyConfig, MPCConfig, CrowdNavEnv], Policy]
@@ -248,7 +263,7 @@ def _agent(name: str) -> Factory:
 
 POLICIES: dict[str, Factory] = {
     "mpc-gpgraph": lambda cfg, mpc, env: GPGraphPolicy(mpc, cfg.predictor, cfg.n_samples, cfg.threads,
-                                                       cfg.replan_every_steps),
+                                                       cfg.replan_every_steps, env.timing),
     "mpc-cv": _planner("mpc-cv", ConstantVelocityMPC),
     "mpc-none": _planner("mpc-none", FrozenMPC),
     "social-force": _planner("social-force", SocialForcePlanner, every=1),
@@ -268,5 +283,33 @@ def make_policy(spec: str | PolicyConfig, env: CrowdNavEnv) -> Policy:
     if cfg.name.startswith(SB3_PREFIX):
         return SB3Policy(cfg.name, env, cfg.deterministic, cfg.threads)
     if is_plugin(cfg.name):
-        return load_factory(cfg.name)(cfg, env)
+        return _current(load_factory(cfg.name)(cfg, env), cfg.name, env)
     return POLICIES[cfg.name](cfg, replace(cfg.mpc, robot=env.config.robot), env)
+
+
+class LegacyPolicy:
+    """A plug-in written for the protocol before `act(view)`: `reset(env, seed)` and `act(obs, env) -> action`.
+    Still runs (it is handed the env it was built for), with a DeprecationWarning once; migrate by reading
+    `view.obs` (or the typed fields) in `act(view)` and returning `Decision(action=...)` or `Decision(control=...)`."""
+
+    def __init__(self, policy: Any, env: CrowdNavEnv) -> None:
+        self.policy, self.env, self.name = policy, env, getattr(policy, "name", type(policy).__name__)
+
+    @property
+    def stats(self) -> PlanStats | None:
+        return getattr(self.policy, "stats", None)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.policy.reset(self.env, seed)
+
+    def act(self, view: PolicyView) -> Decision:
+        return Decision(action=np.asarray(self.policy.act(view.obs, self.env), np.float32).reshape(2))
+
+
+def _current(policy: Any, spec: str, env: CrowdNavEnv) -> Any:
+    """A plug-in policy as it is, or wrapped in `LegacyPolicy` when its `act` still takes (obs, env)."""
+    if len(inspect.signature(policy.act).parameters) != 2:
+        return policy
+    warnings.warn(f"plug-in {spec!r} uses the old protocol act(obs, env); it runs through LegacyPolicy. Migrate to "
+                  "act(view) -> Decision (README, 'Your own policy')", DeprecationWarning, stacklevel=3)
+    return LegacyPolicy(policy, env)

@@ -23,7 +23,7 @@ import numpy as np
 from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
-from envs.policies import PolicyConfig, make_policy
+from envs.policies import PolicyConfig, act, make_policy
 
 
 @dataclass
@@ -68,10 +68,10 @@ def _episode(env: CrowdNavEnv, expert: Any, seed: int, gamma: float, learner: An
     """One episode labelled by the expert. Each step executes the expert's action with probability beta, else
     the learner's (an SB3 policy, deterministic); the expert's action is always the label."""
     obs, _ = env.reset(seed=seed)
-    expert.reset(env, seed)
+    expert.reset(seed)
     observations, actions, rewards, done, info = [], [], [], False, {}
     while not done:
-        label = np.asarray(expert.act(obs, env), np.float32)
+        label = np.asarray(act(expert, env), np.float32)
         action = label
         if learner is not None and (rng is None or rng.random() >= beta):
             action = np.asarray(learner.predict(obs, deterministic=True)[0], np.float32).reshape(2)

@@ -18,6 +18,7 @@ from envs.env import CrowdNavEnv
 from envs.evaluation.episode import episode_record, run_episode
 from envs.evaluation.stats import aggregate
 from envs.policies.sb3_files import load_parameters, save_agent
+from envs.view import Decision, PolicyView
 
 EVAL_FIELDS = ("steps", "wall_s", "success", "collision", "timeout", "mean_return", "time_to_goal_s",
                "intrusion", "min_distance_m")
@@ -37,12 +38,12 @@ class ModelPolicy:
     def __init__(self, model: Any, name: str = "ppo") -> None:
         self.model, self.name = model, name
 
-    def reset(self, env: CrowdNavEnv, seed: int | None = None) -> None:
+    def reset(self, seed: int | None = None) -> None:
         pass
 
-    def act(self, obs: dict[str, np.ndarray], env: CrowdNavEnv) -> np.ndarray:
-        action, _ = self.model.predict(obs, deterministic=True)
-        return np.asarray(action, np.float32).reshape(2)
+    def act(self, view: PolicyView) -> Decision:
+        action, _ = self.model.predict(view.obs, deterministic=True)
+        return Decision(action=np.asarray(action, np.float32).reshape(2))
 
 
 def finite_parameters(model: Any) -> bool:

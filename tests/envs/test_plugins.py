@@ -13,7 +13,7 @@ import pytest
 from envs import CrowdNavConfig, CrowdNavEnv
 from envs.cli import main
 from envs.evaluation.evaluate import evaluate
-from envs.policies import PolicyConfig, make_policy
+from envs.policies import PolicyConfig, act, make_policy
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 SMALL = CrowdNavConfig(scenario="corridor", n_pedestrians=6, time_limit_s=4.0)
@@ -103,17 +103,16 @@ def test_predictor_plugin_feeds_the_mpc(plugin_dir):
     (plugin_dir / "pred_plugin.py").write_text(PREDICTOR_PLUGIN)
     env = CrowdNavEnv(SMALL)
     policy = make_policy(PolicyConfig("mpc-gpgraph", predictor="pred_plugin:make", n_samples=3), env)
-    obs, _ = env.reset(seed=0)
-    policy.reset(env, 0)
-    policy.act(obs, env)
+    env.reset(seed=0)
+    policy.reset(0)
+    act(policy, env)
     frame = env.frame()
     n = frame.n_peds
     assert frame.predictions.shape == (3, 12, n, 2)
     assert np.array_equal(frame.predicted_group_id, np.arange(n) // 2)
     # a predictor on another time step is refused before it can mislead the planner
-    slow = make_policy(PolicyConfig("mpc-gpgraph", predictor="pred_plugin:make_slow"), env)
     with pytest.raises(ValueError, match=r"step_s=0\.8"):
-        slow.reset(env, 0)
+        make_policy(PolicyConfig("mpc-gpgraph", predictor="pred_plugin:make_slow"), env)
 
 
 def test_a_policy_that_raises_is_recorded_as_an_error_and_the_run_goes_on(plugin_dir):
@@ -151,7 +150,7 @@ def test_sb3_agent_loads_safely_and_acts_like_the_saved_model(tmp_path):
     obs, _ = env.reset(seed=3)
     for _ in range(5):
         expected, _ = model.predict(obs, deterministic=True)
-        action = policy.act(obs, env)
+        action = act(policy, env)
         assert np.allclose(action, expected, atol=1e-6)
         obs, *_ = env.step(action)
     import torch
@@ -159,7 +158,7 @@ def test_sb3_agent_loads_safely_and_acts_like_the_saved_model(tmp_path):
     tanh = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, device="cpu",
                policy_kwargs={"activation_fn": torch.nn.Tanh, "net_arch": [16]})
     tanh.save(tmp_path / "tanh.zip")  # an allow-listed class in policy_kwargs is rebuilt without unpickling
-    assert np.allclose(make_policy(PolicyConfig(f"sb3:{tmp_path / 'tanh.zip'}"), env).act(obs, env),
+    assert np.allclose(act(make_policy(PolicyConfig(f"sb3:{tmp_path / 'tanh.zip'}"), env), env),
                        tanh.predict(obs, deterministic=True)[0], atol=1e-6)
     custom = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, device="cpu",
                  policy_kwargs={"activation_fn": torch.nn.Hardswish})
@@ -169,3 +168,45 @@ def test_sb3_agent_loads_safely_and_acts_like_the_saved_model(tmp_path):
     (tmp_path / "junk.zip").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="not a stable-baselines3 model"):
         make_policy(PolicyConfig(f"sb3:{tmp_path / 'junk.zip'}"), env)
+
+
+VIEW_POLICY = '''
+import numpy as np
+
+from envs.view import Decision
+
+
+class Ahead:
+    name = "ahead"
+
+    def reset(self, seed=None):
+        self.seen = []
+
+    def act(self, view):
+        self.seen.append(len(view.pedestrians.pos))
+        return Decision(control=np.array([0.5, 0.0]))
+
+
+def make(config, env):
+    return Ahead()
+'''
+
+
+def test_a_view_plugin_runs_as_is_and_an_old_protocol_one_through_the_legacy_adapter(plugin_dir):
+    from envs.policies import LegacyPolicy
+
+    (plugin_dir / "flaky_plugin.py").write_text(FAILING_POLICY)
+    (plugin_dir / "pred_plugin.py").write_text(VIEW_POLICY)
+    env = CrowdNavEnv(SMALL)
+    new = make_policy(PolicyConfig("pred_plugin:make"), env)
+    assert type(new).__name__ == "Ahead"
+    env.reset(seed=0)
+    new.reset(0)
+    action = act(new, env)  # the control (0.5 m/s, 0 rad/s) reaches the env as its action
+    np.testing.assert_array_equal(action, env.control_to_action(np.array([0.5, 0.0])))
+    assert new.seen == [len(env.pedestrians().pos)]
+    with pytest.warns(DeprecationWarning, match=r"old protocol act\(obs, env\)"):
+        old = make_policy(PolicyConfig("flaky_plugin:make"), env)
+    assert isinstance(old, LegacyPolicy) and old.name == "flaky"
+    old.reset(0)
+    np.testing.assert_array_equal(act(old, env), np.zeros(2, np.float32))

@@ -9,7 +9,7 @@ import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
 from envs.evaluation.episode import run_episode
-from envs.policies import POLICIES, PolicyConfig, make_policy
+from envs.policies import POLICIES, PolicyConfig, act, make_policy
 
 CFG = CrowdNavConfig(n_pedestrians=16, time_limit_s=30.0)
 
@@ -43,9 +43,9 @@ def test_mpc_replans_at_its_interval_and_holds_the_control_in_between(every):
 def test_mpc_gpgraph_uses_the_models_groups_and_samples():
     env = CrowdNavEnv(replace(CFG, time_limit_s=2.0))
     policy = make_policy("mpc-gpgraph", env)
-    obs, _ = env.reset(seed=0)
-    policy.reset(env, 0)
-    policy.act(obs, env)
+    env.reset(seed=0)
+    policy.reset(0)
+    act(policy, env)
     frame = env.frame()
     n = frame.n_peds
     assert frame.predictions.shape == (20, 12, n, 2)
@@ -82,16 +82,16 @@ def test_every_policy_handles_an_empty_scene_a_one_tick_pedestrian_and_one_leavi
     cfg = CrowdNavConfig(scenario="replay", replay=_awkward_scene(tmp_path), time_limit_s=14.0, warmup_s=0.0)
     env = CrowdNavEnv(cfg)
     policy = make_policy(name, env)
-    obs, _ = env.reset(seed=0)
-    policy.reset(env, 0)
+    env.reset(seed=0)
+    policy.reset(0)
     env.robot_state[:3] = [0.0, 0.0, 0.0]
     env.goal = np.array([8.0, 0.0])
     seen, done, info = set(), False, {}
     while not done:  # never raises; every step's action is valid
-        action = policy.act(obs, env)
+        action = act(policy, env)
         assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
         seen.add(len(env.pedestrians().pos))
-        obs, _, term, trunc, info = env.step(action)
+        _, _, term, trunc, info = env.step(action)
         done = term or trunc
     assert 0 in seen and 1 in seen  # the empty scene and the lone pedestrians really happened
     assert info["episode_metrics"]["outcome"] in ("success", "collision", "timeout")
@@ -113,3 +113,41 @@ def test_public_api_and_clashing_names_give_clear_errors():
     with pytest.raises(ValueError, match="valid names") as err:
         make_planner("nope")
     assert "underscores" not in str(err.value)
+
+
+@pytest.mark.parametrize("name", ["mpc-gpgraph", "mpc-cv", "mpc-none", "social-force", "random", "ppo-crowdnav"])
+def test_a_policy_decides_from_the_view_alone(name):
+    """A policy built for one env, handed the view of another env in another state, decides exactly as a policy
+    built for that other env: nothing it returns comes from calling back into the env it was built with."""
+    from envs.view import Decision
+
+    cfg = replace(CFG, scenario="circle_crossing", n_pedestrians=5, robot_visible=False)
+    built_for, other = CrowdNavEnv(cfg), CrowdNavEnv(cfg)
+    built_for.reset(seed=7)
+    other.reset(seed=3)
+    for _ in range(3):
+        other.step(np.array([0.5, 0.1], np.float32))
+    stranger, native = make_policy(name, built_for), make_policy(name, other)
+    stranger.reset(0)
+    native.reset(0)
+    view = other.view()
+    a, b = stranger.act(view), native.act(other.view())
+    assert isinstance(a, Decision) and isinstance(b, Decision)
+    for key in ("control", "action", "plan", "predictions", "predicted_group_id"):
+        x, y = getattr(a, key), getattr(b, key)
+        assert (x is None) == (y is None), key
+        if x is not None:
+            np.testing.assert_array_equal(x, y)
+    np.testing.assert_array_equal(view.robot_state, other.robot_state)  # the view is what the env holds now
+
+
+def test_a_decision_holds_exactly_one_of_control_and_action():
+    from envs.view import Decision
+
+    with pytest.raises(ValueError, match="exactly one"):
+        Decision()
+    with pytest.raises(ValueError, match="exactly one"):
+        Decision(control=np.zeros(2), action=np.zeros(2))
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        Decision(control=np.zeros(3))
+    assert not Decision(action=np.zeros(2)).annotated and Decision(control=np.zeros(2), plan=np.zeros((3, 2))).annotated

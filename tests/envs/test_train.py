@@ -105,12 +105,12 @@ def test_train_evaluates_checkpoints_resumes_and_refuses_other_layouts(tmp_path)
     assert main(["train", "--resume", str(out), "--steps", "768"]) == 0
     state = json.loads((out / "checkpoints" / "state.json").read_text())
     assert state["steps"] == 768
-    from envs.policies import PolicyConfig, make_policy
+    from envs.policies import PolicyConfig, act, make_policy
 
     env = CrowdNavEnv(TINY.env_config())
     agent = make_policy(PolicyConfig(f"sb3:{out / 'final.zip'}"), env)
-    obs, _ = env.reset(seed=0)
-    assert env.action_space.contains(agent.act(obs, env))
+    env.reset(seed=0)
+    assert env.action_space.contains(act(agent, env))
     other = CrowdNavEnv(CrowdNavConfig(observation=ObservationConfig(max_pedestrians=8)))
     with pytest.raises(ValueError, match="max_pedestrians 20 \\(agent\\) vs 8 \\(env\\)"):
         make_policy(PolicyConfig(f"sb3:{out / 'final.zip'}"), other)

@@ -1,0 +1,82 @@
+"""What a policy reads (`PolicyView`) and what it returns (`Decision`): the whole policy <-> env contract.
+
+A policy never calls back into the env. Each step the episode loop (`envs.policies.act`) asks the env for a
+`PolicyView` (copies, made after the last reset/step), hands it to `policy.act(view)`, attaches the decision's
+annotations to the frames drawn from then on, and steps the env with the decision's action.
+
+Learned agents read `view.obs` (the Gymnasium observation) and return an `action` in [-1, 1]^2; planners read the
+typed fields and return a `control` in the robot's units, which the env maps to its action (`action_for`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from envs.timing import PredictionTiming
+from planner import RobotConfig
+
+
+@dataclass(frozen=True)
+class Pedestrians:
+    """The pedestrians in the scene now: pos (N, 2) m, vel (N, 2) m/s, radius (N,) m, group_id (N,)
+    ground truth 0..G-1, ped_id (N,)."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    radius: np.ndarray
+    group_id: np.ndarray
+    ped_id: np.ndarray
+
+
+@dataclass(frozen=True)
+class PolicyView:
+    """What a policy may read of the env at one step (copies; arrays in m, m/s, rad).
+
+    obs: the observation the env returned last (the Dict of `envs.observation`), for learned agents.
+    robot_state: (nz,) the planner's state (unicycle x, y, heading, v, omega; holonomic x, y, vx, vy).
+    goal: (2,). robot: the robot's `RobotConfig`. pedestrians: those in the scene now.
+    history: (obs_len, N, 2) their positions `timing.step_s` apart, the last row now (rows of `pedestrians`).
+    walls: (W, 4) wall segments x0, y0, x1, y1. timing: the prediction timing. dt_s: the env step, s.
+    """
+
+    obs: dict[str, np.ndarray]
+    robot_state: np.ndarray
+    goal: np.ndarray
+    robot: RobotConfig
+    pedestrians: Pedestrians
+    history: np.ndarray
+    walls: np.ndarray
+    timing: PredictionTiming
+    dt_s: float
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A policy's answer for one step: exactly one of `control` and `action`, and optional annotations.
+
+    control: (2,) in the robot's units (unicycle: v m/s, omega rad/s; holonomic: vx, vy m/s), from planners.
+    action: (2,) in [-1, 1] (the env's action space), from learned agents.
+    plan: (H + 1, 2) m, the planned robot path; predictions: (K, T, N, 2) m sampled futures of the view's
+    pedestrians; predicted_group_id: (N,). When all three are None the frames keep the previous annotations
+    (a planner holding its plan between re-plans).
+    """
+
+    control: np.ndarray | None = None
+    action: np.ndarray | None = None
+    plan: np.ndarray | None = None
+    predictions: np.ndarray | None = None
+    predicted_group_id: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if (self.control is None) == (self.action is None):
+            raise ValueError("a Decision holds exactly one of control and action")
+        value = self.control if self.control is not None else self.action
+        if np.shape(value) != (2,):
+            raise ValueError(f"a Decision's control/action must have shape (2,), got {np.shape(value)}")
+
+    @property
+    def annotated(self) -> bool:
+        """Whether the decision carries annotations for the renderer."""
+        return self.plan is not None or self.predictions is not None or self.predicted_group_id is not None
