@@ -22,6 +22,7 @@ from typing import Any
 from crowdsim.cli import OneLineParser, show_defaults  # the CLI conventions, shared with crowdsim
 from envs.cli_options import add_backend_options, add_policy_options, check_backend, default_workers, policy_configs
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from envs.evaluation.suite import DEFAULT_DATA
 from envs.rl import train as train_module
 
 DEMO_POLICY = "mpc-gpgraph"
@@ -77,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(policy=None)
     b.add_argument("--out", type=Path, required=True, metavar="DIR",
                    help="records.jsonl and leaderboard.json/.md/.png; rerun with the same DIR to resume")
-    b.add_argument("--data", type=Path, default=Path("../shared/datasets/eth_ucy"), metavar="DIR",
+    b.add_argument("--data", type=Path, default=DEFAULT_DATA, metavar="DIR",
                    help="ETH/UCY folder (eth/, hotel/, univ/, zara1/, zara2/) for the real cells")
     b.add_argument("--merge", type=Path, nargs="+", action="extend", default=[], metavar="RECORDS",
                    help="records.jsonl files from other runs or machines to merge into the leaderboard")

@@ -1,6 +1,8 @@
 """Collision attribution: who moved into whom at the moment of contact.
 
-Three kinds (`envs.evaluation.records.COLLISION_KINDS`), decided from the step on which contact is first detected:
+The answer goes into the episode's `at_fault` field (`EpisodeMetrics`, `EpisodeRecord`; beside `collision_with`,
+which says what was touched). Three values (`envs.evaluation.records.AT_FAULT`), decided from the step on which
+contact is first detected:
 
     spawn       the pedestrian was not in the scene at the step's start (its track began within contact
                 distance of the robot), or its replayed track began less than `SPAWN_WINDOW_S` before the
@@ -28,7 +30,8 @@ SPAWN_WINDOW_S = 0.4  # a replayed track younger than this at contact is a spawn
 
 def collision_kind(robot_pos: np.ndarray, robot_vel: np.ndarray, ped_pos: np.ndarray, ped_vel: np.ndarray,
                    ped_is_new: bool) -> str:
-    """The kind of a robot-pedestrian contact (see the module docstring). Positions (2,) m, velocities (2,) m/s."""
+    """Who is at fault for a robot-pedestrian contact: "robot", "pedestrian" or "spawn" (the `at_fault` value;
+    see the module docstring). Positions (2,) m, velocities (2,) m/s."""
     if ped_is_new:
         return "spawn"
     gap = np.asarray(ped_pos, float) - np.asarray(robot_pos, float)
@@ -44,7 +47,7 @@ def collision_kind(robot_pos: np.ndarray, robot_vel: np.ndarray, ped_pos: np.nda
 
 
 class SpawnContacts:
-    """Contacts that began as spawns, kept out of the episode when they must not end it
+    """Contacts that began as spawns (at fault: "spawn"), kept out of the episode when they must not end it
     (`CrowdNavConfig.spawn_contact_ends_episode` False): such a pedestrian is ignored for contact, discomfort
     and reward until it is clear of the robot again by `clear_m` (m; the env passes its discomfort distance,
     0.2 m by default: without that margin a non-reactive replayed walker who has just slid off the robot's side

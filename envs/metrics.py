@@ -16,7 +16,10 @@ class EpisodeMetrics:
     min_distance_m: smallest surface distance (centre distance minus both radii) between the robot and
         any pedestrian over the episode, m (inf if nobody was ever in the scene; negative = overlap).
     discomfort_frequency: fraction of steps whose smallest surface distance is under the comfort distance.
-    collision_with: "pedestrian" or "wall"; collision_kind: "robot", "pedestrian" or "spawn" (`envs.collisions`);
+    collision_with: what the robot touched: "pedestrian" or "wall".
+    at_fault: who caused the contact: "robot" (the robot moved into the pedestrian; every wall contact),
+        "pedestrian" (walked into a stopped or retreating robot) or "spawn" (a track that began in contact);
+        `envs.collisions`. "" without a collision.
     collision_time_s: time of the collision, s (NaN without one).
     group_intrusion: whether the robot's body overlapped a ground-truth group's region on any step.
     intrusion_fraction: fraction of steps with such an overlap.
@@ -29,7 +32,7 @@ class EpisodeMetrics:
     success: bool = False
     collision: bool = False
     collision_with: str = ""
-    collision_kind: str = ""
+    at_fault: str = ""
     collision_time_s: float = math.nan
     timeout: bool = False
     time_to_goal_s: float = math.nan
@@ -66,7 +69,7 @@ class EpisodeMetrics:
     def as_dict(self) -> dict[str, float | bool | str | int]:
         return {
             "outcome": self.outcome, "success": self.success, "collision": self.collision,
-            "collision_with": self.collision_with, "collision_kind": self.collision_kind,
+            "collision_with": self.collision_with, "at_fault": self.at_fault,
             "collision_time_s": self.collision_time_s, "timeout": self.timeout, "steps": self.steps,
             "time_s": self.time_s, "time_to_goal_s": self.time_to_goal_s, "path_length_m": self.path_length_m,
             "min_distance_m": self.min_distance_m, "discomfort_frequency": self.discomfort_frequency,

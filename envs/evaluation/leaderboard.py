@@ -75,8 +75,8 @@ def _matrix(board: dict[str, Any], key: str, title: str) -> list[str]:
 
 def _summary(board: dict[str, Any]) -> list[str]:
     lines = ["### Pooled summary", "", "| pool | policy | episodes | errors | success | collision | avoidable coll. "
-             "| kinds robot/ped/spawn (+ non-terminal spawn contacts) | timeout | group intrusion | time to goal (s) "
-             "| plan p50/p95 (ms) |",
+             "| at fault robot/ped/spawn (+ non-terminal spawn contacts) | timeout | group intrusion "
+             "| time to goal (s) | plan p50/p95 (ms) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for pool, res in board["pooled"].items():
         for name, r in res.items():
@@ -85,7 +85,7 @@ def _summary(board: dict[str, Any]) -> list[str]:
             lines.append(
                 f"| {pool} | {name} | {r['episodes']} | {r['errors']} | {_cell_rate(r, 'success_rate')} | "
                 f"{_cell_rate(r, 'collision_rate')} | {_cell_rate(r, 'avoidable_collision_rate')} | "
-                f"{r['collisions_robot']}/{r['collisions_pedestrian']}/{r['collisions_spawn']}"
+                f"{r['collisions_at_fault_robot']}/{r['collisions_at_fault_pedestrian']}/{r['collisions_at_fault_spawn']}"
                 f"{' (+' + str(r['spawn_contacts']) + ')' if r.get('spawn_contacts') else ''} | "
                 f"{fmt(r['timeout_rate'])} | {fmt(r['group_intrusion_rate'])} | {fmt(r['time_to_goal_s'])} | "
                 f"{fmt(r['solve_time_p50_ms'], 1)}/{fmt(r['solve_time_p95_ms'], 1)} |")
@@ -122,7 +122,7 @@ def leaderboard_markdown(board: dict[str, Any]) -> str:
     """The leaderboard as markdown: pooled summary, collision and success matrices, paired comparisons."""
     head = [f"## Leaderboard: suite {board['suite']} v{board['version']}", "", board["description"], ""]
     body = (_summary(board) + _matrix(board, "collision_rate", "Collision rate [95% Wilson CI]")
-            + _matrix(board, "avoidable_collision_rate", "Avoidable collision rate (robot + pedestrian kinds)")
+            + _matrix(board, "avoidable_collision_rate", "Avoidable collision rate (robot or pedestrian at fault)")
             + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + _paired(board))
     return "\n".join(head + body)
 

@@ -18,10 +18,12 @@ from typing import Any
 from envs.atomic import append_line
 
 OUTCOMES = ("success", "collision", "timeout", "error")
-# How a collision came about (`envs.collisions`): the robot moved into a pedestrian or wall; a pedestrian walked
-# into a stopped or retreating robot; a replayed track began within contact distance of the robot.
-COLLISION_KINDS = ("robot", "pedestrian", "spawn")
-AVOIDABLE_KINDS = ("robot", "pedestrian")
+# Who is at fault for a collision (`envs.collisions`): "robot", it moved into a pedestrian or wall; "pedestrian",
+# who walked into a stopped or retreating robot; "spawn", a replayed track began within contact distance of the robot.
+AT_FAULT = ("robot", "pedestrian", "spawn")
+AVOIDABLE_AT_FAULT = ("robot", "pedestrian")
+# Record fields renamed since records were first written: old name -> new name (old files still load).
+RENAMED_FIELDS = {"collision_kind": "at_fault"}
 
 
 def finite_or_none(value: Any) -> float | None:
@@ -38,7 +40,8 @@ class EpisodeRecord:
     of a failed episode, min distance when nobody was ever in the scene).
 
     outcome: "success" | "collision" | "timeout" | "error" (the policy raised; `error` has the message).
-    collision_with: "pedestrian" | "wall" | None. collision_kind: one of `COLLISION_KINDS` or None.
+    collision_with: what the robot touched, "pedestrian" | "wall" | None. at_fault: who caused it, one of `AT_FAULT`
+    or None (written as `collision_kind` before; such records still load, `RENAMED_FIELDS`).
     collision_time_s: time of the (first, episode-ending) collision. spawn_contacts: contacts of kind "spawn" that
     did not end the episode (`CrowdNavConfig.spawn_contact_ends_episode`). plans/fallbacks: planner calls and
     fallbacks; solve_times_ms: every solver call's wall time. fingerprint: identifies the settings the episode
@@ -50,7 +53,7 @@ class EpisodeRecord:
     outcome: str
     cell: str = ""
     collision_with: str | None = None
-    collision_kind: str | None = None
+    at_fault: str | None = None
     collision_time_s: float | None = None
     steps: int = 0
     time_s: float = 0.0
@@ -72,8 +75,8 @@ class EpisodeRecord:
     def __post_init__(self) -> None:
         if self.outcome not in OUTCOMES:
             raise ValueError(f"unknown episode outcome {self.outcome!r}; valid: {', '.join(OUTCOMES)}")
-        if self.collision_kind is not None and self.collision_kind not in COLLISION_KINDS:
-            raise ValueError(f"unknown collision kind {self.collision_kind!r}; valid: {', '.join(COLLISION_KINDS)}")
+        if self.at_fault is not None and self.at_fault not in AT_FAULT:
+            raise ValueError(f"unknown at_fault value {self.at_fault!r}; valid: {', '.join(AT_FAULT)}")
 
     @property
     def key(self) -> tuple[str, str, int]:
@@ -82,7 +85,7 @@ class EpisodeRecord:
 
     @property
     def avoidable_collision(self) -> bool:
-        return self.outcome == "collision" and self.collision_kind in AVOIDABLE_KINDS
+        return self.outcome == "collision" and self.at_fault in AVOIDABLE_AT_FAULT
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -91,11 +94,17 @@ class EpisodeRecord:
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> EpisodeRecord:
+        """A record from its JSON form; fields under an old name (`RENAMED_FIELDS`) are read as the new one."""
+        d = dict(d)
+        for old, new in RENAMED_FIELDS.items():
+            if old in d:
+                if new in d and d[new] != d[old]:
+                    raise ValueError(f"record has both {old!r} ({d[old]!r}) and {new!r} ({d[new]!r})")
+                d[new] = d.pop(old)
         names = {f.name for f in fields(cls)}
         unknown = set(d) - names
         if unknown:
             raise ValueError(f"unknown record field(s) {sorted(unknown)}")
-        d = dict(d)
         d["solve_times_ms"] = tuple(float(t) for t in d.get("solve_times_ms", ()))
         return cls(**d)
 

@@ -53,8 +53,9 @@ def markdown_table(result: dict[str, Any]) -> str:
         ("success rate [95% CI]", rate_text(result, "success_rate")),
         ("collision rate [95% CI]", rate_text(result, "collision_rate")),
         ("avoidable collision rate [95% CI]", rate_text(result, "avoidable_collision_rate")),
-        ("collisions: robot / pedestrian / spawn",
-         f"{result['collisions_robot']} / {result['collisions_pedestrian']} / {result['collisions_spawn']}"),
+        ("collisions, at fault: robot / pedestrian / spawn",
+         f"{result['collisions_at_fault_robot']} / {result['collisions_at_fault_pedestrian']} / "
+         f"{result['collisions_at_fault_spawn']}"),
         ("time to first collision, mean (s)", fmt(result["time_to_first_collision_s"])),
         ("errors", str(result["errors"])),
         ("timeout rate", fmt(result["timeout_rate"])),

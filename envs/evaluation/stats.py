@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.evaluation.records import COLLISION_KINDS, EpisodeRecord, finite_or_none
+from envs.evaluation.records import AT_FAULT, EpisodeRecord, finite_or_none
 
 Z95 = 1.959963984540054  # two-sided 95% normal quantile
 ALPHA = 0.05
@@ -63,10 +63,11 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     """The summary of one policy's episodes (JSON-ready).
 
     Rates (with 95% Wilson intervals) are over completed episodes; `group_intrusion_rate_success` over
-    successful ones. Collisions split by kind (`collisions_<kind>`); `avoidable_collision_rate` counts the
-    robot and pedestrian kinds, not tracks that began in contact; `spawn_contacts` counts the spawn contacts that
-    did not end their episode (`CrowdNavConfig.spawn_contact_ends_episode` False). Time to goal and path length are over
-    successes; min distance is the mean of the per-episode minima (episodes without pedestrians left out);
+    successful ones. Collisions split by who was at fault (`collisions_at_fault_<robot|pedestrian|spawn>`);
+    `avoidable_collision_rate` counts robot and pedestrian faults, not tracks that began in contact;
+    `spawn_contacts` counts the spawn contacts that did not end their episode
+    (`CrowdNavConfig.spawn_contact_ends_episode` False). Time to goal and path length are over successes;
+    min distance is the mean of the per-episode minima (episodes without pedestrians left out);
     solve-time percentiles are over every solver call (None without any); fallback rate = fallbacks / plans.
     """
     if not records:
@@ -85,8 +86,8 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     _rate(out, "group_intrusion_rate", sum(r.group_intrusion for r in done), n)
     out["group_intrusion_rate_success"] = (sum(r.group_intrusion for r in succ) / len(succ)) if succ else None
     out["collisions"] = len(coll)
-    for kind in COLLISION_KINDS:
-        out[f"collisions_{kind}"] = sum(r.collision_kind == kind for r in coll)
+    for who in AT_FAULT:
+        out[f"collisions_at_fault_{who}"] = sum(r.at_fault == who for r in coll)
     out["wall_collisions"] = sum(r.collision_with == "wall" for r in coll)
     out["spawn_contacts"] = int(sum(r.spawn_contacts for r in done))  # non-terminal ones (kept out of the episode)
     out["time_to_first_collision_s"] = _mean([r.collision_time_s for r in coll if r.collision_time_s is not None])

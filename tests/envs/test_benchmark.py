@@ -152,7 +152,7 @@ def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_pat
 
 def test_record_store_skips_a_partial_line_and_appends_after_it(tmp_path):
     store = RecordStore(tmp_path / RECORDS)
-    r = EpisodeRecord(policy="p", seed=1, outcome="collision", cell="c", collision_kind="spawn",
+    r = EpisodeRecord(policy="p", seed=1, outcome="collision", cell="c", at_fault="spawn",
                       solve_times_ms=(1.5, 2.25))
     store.append(r)
     with open(store.path, "a") as f:
@@ -164,6 +164,44 @@ def test_record_store_skips_a_partial_line_and_appends_after_it(tmp_path):
         f.write("not json\n")
     with pytest.raises(ValueError, match=r"records.jsonl:3"):
         store.read()
+
+
+# a record line as written before the at_fault rename (the field was called collision_kind)
+OLD_LINE = ('{"policy":"mpc-cv","seed":3,"outcome":"collision","cell":"real-hotel","collision_with":"pedestrian",'
+            '"collision_kind":"pedestrian","collision_time_s":4.2,"steps":42,"time_s":4.2,"time_to_goal_s":null,'
+            '"path_length_m":3.1,"min_distance_m":-0.05,"discomfort_frequency":0.2,"group_intrusion":false,'
+            '"intrusion_fraction":0.0,"spawn_contacts":0,"plans":42,"fallbacks":0,"ret":-1.5,"wall_time_s":2.0,'
+            '"error":null,"fingerprint":"0123456789abcdef","solve_times_ms":[1.5,2.0]}')
+
+
+def test_records_written_with_collision_kind_load_as_at_fault(tmp_path):
+    from envs.evaluation.stats import aggregate
+
+    path = tmp_path / RECORDS
+    path.write_text(OLD_LINE + "\n")
+    [r] = read_records(path)
+    assert r.at_fault == "pedestrian" and r.collision_with == "pedestrian" and r.avoidable_collision
+    assert (r.cell, r.policy, r.seed, r.fingerprint) == ("real-hotel", "mpc-cv", 3, "0123456789abcdef")
+    assert aggregate([r])["collisions_at_fault_pedestrian"] == 1
+    RecordStore(path).append(replace(r, seed=4))  # new lines use the new name
+    last = json.loads(path.read_text().splitlines()[-1])
+    assert last["at_fault"] == "pedestrian" and "collision_kind" not in last
+    assert [x.at_fault for x in read_records(path)] == ["pedestrian", "pedestrian"]
+    with pytest.raises(ValueError, match="both"):
+        EpisodeRecord.from_json({**json.loads(OLD_LINE), "at_fault": "robot"})
+
+
+def test_a_folder_written_before_the_rename_resumes_to_the_same_leaderboard(tmp_path):
+    suite = parse_suite(TINY)
+    cells = suite.select(["corridor-a"])
+    new = run_benchmark(suite, cells, POLICIES, tmp_path, progress=False)
+    path = tmp_path / RECORDS
+    text = path.read_text()
+    assert text.count('"at_fault"') == 6
+    path.write_text(text.replace('"at_fault"', '"collision_kind"'))  # as the old code wrote it
+    old = run_benchmark(suite, cells, POLICIES, tmp_path, progress=False)
+    assert old["run"]["episodes_run"] == 0 and old["run"]["episodes_resumed"] == 6
+    assert _untimed(old) == _untimed(new)
 
 
 def test_cli_benchmark_misuse_is_one_line(tmp_path, capsys):
@@ -239,3 +277,11 @@ def test_real_cells_give_mpc_gpgraph_the_scenes_leave_one_out_predictor(tmp_path
                                                                "plaza-low-visible": "gpgraph-sgcn-synthetic"}
     with pytest.raises(ValueError, match="per cell"):
         make_policy(explicit, plan.tasks[0].env)
+
+
+def test_cli_data_default_is_the_suites_default_data_folder():
+    from envs import cli
+    from envs.evaluation import suite as suite_module
+
+    args = cli.build_parser().parse_args(["benchmark", "--suite", "smoke", "--out", "x"])
+    assert args.data is suite_module.DEFAULT_DATA

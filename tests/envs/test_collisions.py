@@ -60,13 +60,13 @@ def _robot_waits_at_origin(tmp_path: Path, track: list[tuple[int, float, float]]
 def test_env_pedestrian_walks_into_a_stopped_robot(tmp_path):
     # pedestrian 1 walks from x = 6 towards the robot at the origin at 1 m/s (0.4 m per 0.4 s step)
     _, m = _robot_waits_at_origin(tmp_path, [(t, 6.0 - 0.4 * t, 0.0) for t in range(40)])
-    assert m["collision"] and m["collision_kind"] == "pedestrian"
+    assert m["collision"] and m["at_fault"] == "pedestrian"
 
 
 def test_env_track_that_starts_on_the_robot_is_a_spawn(tmp_path):
     # pedestrian 1 appears at step 20 (8 s), 0.3 m from where the robot waits
     env, m = _robot_waits_at_origin(tmp_path, [(t, 0.3, 0.0) for t in range(20, 40)])
-    assert m["collision"] and m["collision_kind"] == "spawn"
+    assert m["collision"] and m["at_fault"] == "spawn"
     assert m["collision_time_s"] == pytest.approx(20 * 0.4 - env.config.warmup_s, abs=0.11)
 
 
@@ -74,14 +74,14 @@ def test_env_track_that_begins_just_before_contact_is_a_spawn(tmp_path):
     # pedestrian 1 appears at step 20, 1.0 m from the robot's centre, and runs at it at 2 m/s (0.8 m per 0.4 s
     # step): contact within one prediction step of its first annotation, before its velocity could be seen
     _, m = _robot_waits_at_origin(tmp_path, [(t, 1.0 - 0.8 * (t - 20), 0.0) for t in range(20, 24)])
-    assert m["collision"] and m["collision_kind"] == "spawn"
+    assert m["collision"] and m["at_fault"] == "spawn"
 
 
 def test_env_track_seen_for_a_while_is_not_a_spawn(tmp_path):
     # the same run-in, but the track began 3 steps (1.2 s) earlier, standing still 1.0 m away
     track = [(t, 1.0, 0.0) for t in range(17, 21)] + [(t, 1.0 - 0.8 * (t - 20), 0.0) for t in range(21, 24)]
     _, m = _robot_waits_at_origin(tmp_path, track)
-    assert m["collision"] and m["collision_kind"] == "pedestrian"
+    assert m["collision"] and m["at_fault"] == "pedestrian"
 
 
 def _robot_waits_with_spawns_allowed(tmp_path: Path, track: list[tuple[int, float, float]]) -> dict:
@@ -115,7 +115,7 @@ def test_after_a_spawn_contact_clears_a_new_contact_counts(tmp_path):
     away = [(t, 0.3, 0.6 * (t - 23)) for t in range(24, 29)]
     back = [(t, 0.3, 3.0 - 0.6 * (t - 28)) for t in range(29, 40)]
     m = _robot_waits_with_spawns_allowed(tmp_path, [(t, 0.3, 0.0) for t in range(20, 24)] + away + back)
-    assert m["collision"] and m["collision_kind"] == "pedestrian" and m["spawn_contacts"] == 1
+    assert m["collision"] and m["at_fault"] == "pedestrian" and m["spawn_contacts"] == 1
 
 
 def test_replay_track_age(tmp_path):

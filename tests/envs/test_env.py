@@ -1,4 +1,4 @@
-"""CrowdNav-v0: spaces, the step sequence, rewards, termination, determinism and bad input."""
+"""CrowdNav-v1: spaces, the step sequence, rewards, termination, determinism and bad input."""
 
 from __future__ import annotations
 
@@ -49,12 +49,20 @@ def drive_straight(env: CrowdNavEnv, max_steps: int = 200) -> tuple[list[dict], 
 
 
 def test_registered_and_makes_the_env():
-    assert envs.ENV_ID in gym.registry
+    assert envs.ENV_ID == "crowdnav/CrowdNav-v1" and envs.ENV_ID in gym.registry
     env = gym.make(envs.ENV_ID, config=SMALL)
     obs, info = env.reset(seed=3)
     assert env.observation_space.contains(obs)
     assert "goal_distance_m" in info
     env.close()
+
+
+def test_v0_is_gone_and_gymnasium_points_at_v1():
+    """v1's info["episode_metrics"] says at_fault where v0 said collision_kind: the old id must not make the new
+    env silently."""
+    assert "crowdnav/CrowdNav-v0" not in gym.registry
+    with pytest.raises(gym.error.DeprecatedEnv, match="CrowdNav-v1"), pytest.warns(DeprecationWarning):
+        gym.make("crowdnav/CrowdNav-v0", config=SMALL)
 
 
 def test_gymnasium_env_checker_passes():
@@ -174,7 +182,7 @@ def test_collision_terminates_along_the_step(tmp_path):
     m = infos[-1]["episode_metrics"]
     assert m["collision"] and not m["success"] and infos[-1]["is_success"] is False
     assert m["collision_with"] == "pedestrian"
-    assert m["collision_kind"] == "robot"  # the robot drove into a standing person (envs.collisions)
+    assert m["at_fault"] == "robot"  # the robot drove into a standing person (envs.collisions)
     assert m["collision_time_s"] == pytest.approx(m["time_s"]) and m["collision_time_s"] > 1.0
     assert infos[-1]["reward_terms"]["collision"] == SMALL.rewards.collision
     # it stopped at first contact: centre distance near robot + pedestrian radius (0.3 + 0.25)

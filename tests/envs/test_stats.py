@@ -18,7 +18,7 @@ def _rec(seed, outcome, ttg=None, path=10.0, mind=0.5, disc=0.0, intr=False, pla
     if outcome == "collision" and kind is None:
         kind = "robot"
     return EpisodeRecord(policy=policy, seed=seed, outcome=outcome, cell=cell,
-                         collision_with="pedestrian" if outcome == "collision" else None, collision_kind=kind,
+                         collision_with="pedestrian" if outcome == "collision" else None, at_fault=kind,
                          collision_time_s=coll_t, steps=100, time_s=10.0, time_to_goal_s=ttg, path_length_m=path,
                          min_distance_m=mind, discomfort_frequency=disc, group_intrusion=intr,
                          intrusion_fraction=0.1 * intr, plans=plans, fallbacks=fallbacks, ret=1.0,
@@ -51,7 +51,7 @@ def test_aggregate_hand_made_records():
     assert r["group_intrusion_rate_success"] == pytest.approx(1 / 3)
     assert r["success_rate_ci95"] == pytest.approx(wilson_interval(3, 5))
     assert r["collision_rate_ci95"] == pytest.approx(wilson_interval(1, 5))
-    assert r["collisions"] == 1 and r["collisions_robot"] == 1 and r["time_to_first_collision_s"] == 4.0
+    assert r["collisions"] == 1 and r["collisions_at_fault_robot"] == 1 and r["time_to_first_collision_s"] == 4.0
     assert r["time_to_goal_s"] == pytest.approx(30.0) and r["time_to_goal_median_s"] == pytest.approx(20.0)
     assert r["path_length_m"] == pytest.approx(16.0)
     assert r["min_distance_m"] == pytest.approx((0.4 + 0.2 + 0.6 - 0.1) / 4)
@@ -63,7 +63,7 @@ def test_aggregate_hand_made_records():
     json.dumps(r, allow_nan=False)  # strict JSON
 
 
-def test_collision_kinds_and_errors_are_counted_apart():
+def test_collisions_by_fault_and_errors_are_counted_apart():
     records = [_rec(0, "collision", kind="robot"), _rec(1, "collision", kind="pedestrian"),
                _rec(2, "collision", kind="spawn"), _rec(3, "success", ttg=5.0),
                EpisodeRecord(policy="p", seed=4, outcome="error", cell="c", error="RuntimeError: boom")]
@@ -71,7 +71,8 @@ def test_collision_kinds_and_errors_are_counted_apart():
     assert r["episodes"] == 5 and r["completed"] == 4 and r["errors"] == 1
     assert r["collision_rate"] == 0.75  # over completed episodes
     assert r["avoidable_collision_rate"] == 0.5  # the spawn contact is not the robot's doing
-    assert (r["collisions_robot"], r["collisions_pedestrian"], r["collisions_spawn"]) == (1, 1, 1)
+    assert (r["collisions_at_fault_robot"], r["collisions_at_fault_pedestrian"],
+            r["collisions_at_fault_spawn"]) == (1, 1, 1)
 
 
 def test_aggregate_without_successes_solver_or_plans():
