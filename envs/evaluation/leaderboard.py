@@ -93,10 +93,18 @@ def _summary(board: dict[str, Any]) -> list[str]:
 
 
 def _diff(d: dict[str, Any] | None) -> str:
-    """A paired mean difference with its 95% interval, `*` when the interval excludes 0."""
+    """A paired mean difference with its 95% interval, `*` when the interval excludes 0; "n.t." (not tested, no
+    interval) below `stats.MIN_BOOTSTRAP_PAIRS` pairs."""
     if not d:
         return "–"
+    if not d["tested"]:
+        return f"{d['mean_diff']:+.2f} ({d['pairs']} pairs) n.t."
     return f"{d['mean_diff']:+.2f} [{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]{' *' if d['significant'] else ''}"
+
+
+def _untested(c: dict[str, Any]) -> bool:
+    """Whether any test of the comparison `c` was not made (too few pairs)."""
+    return any(isinstance(e, dict) and e.get("tested") is False for e in c.values())
 
 
 def _paired(board: dict[str, Any]) -> list[str]:
@@ -108,13 +116,20 @@ def _paired(board: dict[str, Any]) -> list[str]:
         for c in comps:
             def cnt(k: str, c: dict[str, Any] = c) -> str:
                 e = c[k]
-                mark = " *" if e["significant"] else ""
-                return f"{e['a']}/{e['b']} ({e['a_only']}, {e['b_only']}) | {e['p_value']:.3g}{mark}"
+                p = f"{e['p_value']:.3g}{' *' if e['significant'] else ''}" if e["tested"] else "n.t."
+                return f"{e['a']}/{e['b']} ({e['a_only']}, {e['b_only']}) | {p}"
             lines.append(f"| {pool} | {c['policy_a']} vs {c['policy_b']} | {c['pairs']} | {cnt('collision')} | "
                          f"{cnt('avoidable_collision')} | {cnt('success')} | {cnt('group_intrusion')} | "
                          f"{_diff(c.get('path_length_m'))} | {_diff(c.get('min_distance_m'))} |")
     lines.append("")
     lines.append("`*`: significant at alpha = 0.05 (no correction for the number of comparisons).")
+    untested = [c for comps in board["paired"].values() for c in comps if _untested(c)]
+    if untested:
+        c = untested[0]
+        lines.append(f"n.t.: not tested, too few pairs: a McNemar test needs at least {c['min_discordant_pairs']} "
+                     "discordant pairs (with fewer no p below 0.05 is possible), a paired bootstrap at least "
+                     f"{c['min_bootstrap_pairs']} pairs (with fewer its interval is too narrow: at 2 pairs it "
+                     "excludes 0 for about half of all differences that are really 0).")
     return [*lines, ""]
 
 

@@ -16,6 +16,13 @@ from envs.evaluation.records import AT_FAULT, EpisodeRecord, finite_or_none
 
 Z95 = 1.959963984540054  # two-sided 95% normal quantile
 ALPHA = 0.05
+# Significance needs enough pairs; below these minimums a comparison is not tested (`tested` False, never
+# `significant`) and the tables say so. The paired bootstrap (path length, min distance) needs MIN_BOOTSTRAP_PAIRS:
+# its percentile interval is the spread of resampled means, too narrow for few pairs. Simulated on zero-mean
+# differences (normal, Student t3 and skewed exponential; 4000 trials each) its 95% interval excluded 0 in 49% of
+# trials at 2 pairs (the smoke suite's cells), 16-22% at 5, 9-15% at 10, 7-11% at 20 and 7-8% at 30: the rate
+# falls steeply up to about 20 pairs and slowly after, so 20 is the floor (the shipped suites' pools have 100+).
+MIN_BOOTSTRAP_PAIRS = 20
 
 
 def wilson_interval(k: int, n: int, z: float = Z95) -> list[float] | None:
@@ -38,6 +45,15 @@ def mcnemar_exact(b: int, c: int) -> float:
     k = min(b, c)
     tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
     return min(1.0, 2.0 * tail)
+
+
+def min_discordant_pairs(alpha: float = ALPHA) -> int:
+    """The fewest discordant pairs with which the two-sided exact McNemar test can reach p < alpha (all of them on
+    one side): 6 at alpha 0.05 (5 give p = 2 / 2**5 = 0.0625). With fewer the test is not made."""
+    d = 1
+    while mcnemar_exact(d, 0) >= alpha:
+        d += 1
+    return d
 
 
 def paired_bootstrap(diff: np.ndarray, rng: np.random.Generator, n_boot: int = 10_000) -> tuple[float, list[float]]:
@@ -123,31 +139,41 @@ def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], al
     """Policy a against policy b on the episodes both completed (matched by cell and seed).
 
     For each binary event (success, collision, avoidable collision, group intrusion): counts, the discordant
-    pairs (a only, b only), the exact McNemar p-value and `significant` (p < alpha). For the path length of
-    episodes both succeeded, and for the smallest robot-pedestrian surface distance of episodes where both met
-    somebody (`min_distance_m`: a graded safety margin, more sensitive than the collision count): the mean paired
-    difference a - b with a 95% paired-bootstrap interval (seeded by `seed`), `significant` when it excludes 0.
+    pairs (a only, b only), the exact McNemar p-value, `tested` (at least `min_discordant_pairs(alpha)` discordant
+    pairs) and `significant` (tested and p < alpha). For the path length of episodes both succeeded, and for the
+    smallest robot-pedestrian surface distance of episodes where both met somebody (`min_distance_m`: a graded
+    safety margin, more sensitive than the collision count): the mean paired difference a - b and, from
+    `MIN_BOOTSTRAP_PAIRS` pairs on (`tested`), its 95% paired-bootstrap interval (seeded by `seed`; `ci95` None
+    below), `significant` when it excludes 0.
     """
     bkeys = {(r.cell, r.seed): r for r in b if r.outcome != "error"}
     pairs = [(r, bkeys[(r.cell, r.seed)]) for r in a if r.outcome != "error" and (r.cell, r.seed) in bkeys]
+    min_discordant = min_discordant_pairs(alpha)
     out: dict[str, Any] = {"policy_a": a[0].policy if a else None, "policy_b": b[0].policy if b else None,
-                           "pairs": len(pairs), "alpha": alpha, "test": "exact McNemar (two-sided)"}
+                           "pairs": len(pairs), "alpha": alpha, "test": "exact McNemar (two-sided)",
+                           "min_discordant_pairs": min_discordant, "min_bootstrap_pairs": MIN_BOOTSTRAP_PAIRS}
     for name, event in PAIRED_EVENTS.items():
         only_a = sum(event(x) and not event(y) for x, y in pairs)
         only_b = sum(event(y) and not event(x) for x, y in pairs)
         p = mcnemar_exact(only_a, only_b)
+        tested = only_a + only_b >= min_discordant
         out[name] = {"a": sum(event(x) for x, _ in pairs), "b": sum(event(y) for _, y in pairs),
-                     "a_only": only_a, "b_only": only_b, "p_value": p, "significant": p < alpha}
+                     "a_only": only_a, "b_only": only_b, "p_value": p, "tested": tested,
+                     "significant": tested and p < alpha}
     graded = {"path_length_m": [(x.path_length_m, y.path_length_m) for x, y in pairs
                                 if x.outcome == y.outcome == "success"],
               "min_distance_m": [(x.min_distance_m, y.min_distance_m) for x, y in pairs
                                  if x.min_distance_m is not None and y.min_distance_m is not None]}
     for name, both in graded.items():
-        if both:
+        if len(both) >= MIN_BOOTSTRAP_PAIRS:
             mean, ci = paired_bootstrap(np.subtract(*np.array(both, float).T), np.random.default_rng(seed))
-            out[name] = {"pairs": len(both), "mean_diff": mean, "ci95": ci, "significant": not ci[0] <= 0.0 <= ci[1]}
+            out[name] = {"pairs": len(both), "mean_diff": mean, "ci95": ci, "tested": True,
+                         "significant": not ci[0] <= 0.0 <= ci[1]}
+        elif both:
+            out[name] = {"pairs": len(both), "mean_diff": float(np.mean(np.subtract(*np.array(both, float).T))),
+                         "ci95": None, "tested": False, "significant": False}
     return out
 
 
-__all__ = ["aggregate", "finite_or_none", "mcnemar_exact", "paired_bootstrap", "paired_comparison",
-           "wilson_interval"]
+__all__ = ["MIN_BOOTSTRAP_PAIRS", "aggregate", "finite_or_none", "mcnemar_exact", "min_discordant_pairs",
+           "paired_bootstrap", "paired_comparison", "wilson_interval"]

@@ -154,3 +154,60 @@ def test_paired_min_distance_is_a_graded_margin_over_episodes_where_both_met_som
     assert c["ci95"][0] < c["mean_diff"] < c["ci95"][1]
     same = paired_comparison(b, [_rec(r.seed, "success", ttg=5.0, mind=r.min_distance_m, policy="c") for r in b])
     assert same["min_distance_m"]["mean_diff"] == 0.0 and not same["min_distance_m"]["significant"]
+
+
+def test_two_pairs_are_not_tested_and_never_starred():
+    """The smoke suite's case: 2 paired episodes, b keeps 0.01 m more than a in both. A percentile bootstrap of two
+    equal differences is the interval [-0.01, -0.01], which 'excludes 0': it must not be called significant."""
+    a = [_rec(s, "success", ttg=5.0, mind=0.30, path=10.0, policy="a") for s in range(2)]
+    b = [_rec(s, "success", ttg=5.0, mind=0.31, path=10.5, policy="b") for s in range(2)]
+    c = paired_comparison(a, b)
+    for name in ("min_distance_m", "path_length_m"):
+        assert c[name]["pairs"] == 2 and c[name]["tested"] is False and c[name]["ci95"] is None
+        assert not c[name]["significant"]
+    assert c["min_distance_m"]["mean_diff"] == pytest.approx(-0.01)
+    json.dumps(c, allow_nan=False)
+
+
+def test_the_bootstrap_is_tested_from_min_bootstrap_pairs_on():
+    from envs.evaluation.stats import MIN_BOOTSTRAP_PAIRS
+
+    assert MIN_BOOTSTRAP_PAIRS == 20
+    rng = np.random.default_rng(2)
+    noise = rng.normal(0.0, 0.01, MIN_BOOTSTRAP_PAIRS)
+
+    def compare(n):
+        a = [_rec(s, "success", ttg=5.0, mind=0.5 + float(noise[s]), policy="a") for s in range(n)]
+        b = [_rec(s, "success", ttg=5.0, mind=0.6, policy="b") for s in range(n)]
+        return paired_comparison(a, b)["min_distance_m"]
+
+    below, at = compare(MIN_BOOTSTRAP_PAIRS - 1), compare(MIN_BOOTSTRAP_PAIRS)
+    assert not below["tested"] and not below["significant"] and below["ci95"] is None
+    assert at["tested"] and at["significant"] and at["ci95"][1] < 0  # a clear 0.1 m, tested, is starred
+
+
+def test_mcnemar_needs_six_discordant_pairs_at_alpha_005():
+    from envs.evaluation.stats import min_discordant_pairs
+
+    assert min_discordant_pairs(0.05) == 6 and mcnemar_exact(5, 0) > 0.05 > mcnemar_exact(6, 0)
+    for d, tested in ((5, False), (6, True)):
+        a = [_rec(s, "collision" if s < d else "success", ttg=5.0, policy="a") for s in range(30)]
+        b = [_rec(s, "success", ttg=5.0, policy="b") for s in range(30)]
+        c = paired_comparison(a, b)["collision"]
+        assert c["tested"] is tested and c["significant"] is tested
+
+
+def test_the_leaderboard_says_why_a_small_comparison_is_not_starred():
+    from envs.evaluation.leaderboard import leaderboard, leaderboard_markdown
+    from envs.evaluation.suite import parse_suite
+    from envs.policies import PolicyConfig
+
+    suite = parse_suite({"name": "s", "version": 1, "cells": [
+        {"name": "c", "scenario": "corridor", "n_pedestrians": 4, "robot_visible": True, "episodes": 2, "seed0": 0}]})
+    records = [_rec(s, "success", ttg=5.0, mind=0.30, policy="random") for s in range(2)]
+    records += [_rec(s, "success", ttg=5.0, mind=0.31, policy="social-force") for s in range(2)]
+    board = leaderboard(suite, list(suite.cells), [PolicyConfig("random"), PolicyConfig("social-force")], records)
+    md = leaderboard_markdown(board)
+    rows = [ln for ln in md.splitlines() if ln.startswith("| synthetic | random vs social-force")]
+    assert len(rows) == 1 and "*" not in rows[0] and "-0.01 (2 pairs) n.t." in rows[0]
+    assert "n.t.: not tested, too few pairs" in md and "at least 20 pairs" in md and "at least 6 discordant" in md
