@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from crowdsim.config import GroupConfig, SimConfig
-from crowdsim.generate import BACKENDS, SPLITS, RunSpec, generate, make_dataset
+from crowdsim.generate import BACKENDS, SPLITS, DatasetIncomplete, RunSpec, generate, make_dataset
 from crowdsim.presets import PRESETS, get_preset, sample_config
 from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS
 
@@ -244,6 +244,12 @@ def _dataset(args: argparse.Namespace) -> int:
                            workers=args.workers, address=args.address, preset=args.preset)
     except ConnectionError as exc:  # ray.init could not reach --address
         print(f"crowdsim: error: cannot connect to Ray at {args.address}: {exc}", file=sys.stderr)
+        return 1
+    except DatasetIncomplete as exc:  # everything else was written: say so, then one line per missing recording
+        for split in SPLITS:
+            print(f"{split}: {len(exc.paths[split])} recordings in {args.out / split}")
+        for name, cause in exc.failures.items():
+            print(f"crowdsim: error: recording {name} not written: {cause}", file=sys.stderr)
         return 1
     for split in SPLITS:
         print(f"{split}: {len(out[split])} recordings in {args.out / split}")

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import multiprocessing
-import sys
 from collections.abc import Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import closing
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -16,6 +13,7 @@ from tqdm import tqdm
 
 from crowdsim import __version__
 from crowdsim.config import SimConfig
+from crowdsim.distributed import WorkerDied, process_context, run_in_processes
 from crowdsim.export import RecordingFiles, TrajectoryLog, recording_files, write_files, write_recording
 from crowdsim.presets import get_preset, sample_config
 from crowdsim.sim import CrowdSimulator
@@ -147,32 +145,26 @@ def dataset_jobs(scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
     return jobs
 
 
-def _mp_context() -> multiprocessing.context.BaseContext:
-    """forkserver where available (no fork of a threaded parent), with the simulator imported once."""
-    if sys.platform.startswith("linux") and "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["crowdsim.generate"])
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def run_local(jobs: list[RecordingJob], workers: int = 1) -> Iterator[tuple[int, RecordingFiles]]:
-    """Render `jobs`, yielding (index in jobs, files) as they finish: in this process if workers <= 1,
-    else in a pool of `workers` processes."""
+def run_local(jobs: list[RecordingJob], workers: int = 1) -> Iterator[tuple[int, RecordingFiles | WorkerDied]]:
+    """Render `jobs`, yielding (index in jobs, files) as they finish: in this process if workers <= 1, else in a
+    pool of `workers` processes (`crowdsim.distributed.run_in_processes`: a dead worker's recordings run again;
+    one whose worker died twice comes back as `WorkerDied`)."""
     if workers <= 1 or len(jobs) <= 1:
         for i, job in enumerate(jobs):
             yield i, render_job(job)
         return
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=_mp_context())
-    try:
-        futures = {pool.submit(render_job, job): i for i, job in enumerate(jobs)}
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                yield futures[fut], fut.result()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    yield from run_in_processes(render_job, jobs, min(workers, len(jobs)), process_context(["crowdsim.generate"]))
+
+
+class DatasetIncomplete(RuntimeError):
+    """Raised by `make_dataset` at the end, after every other recording was written: some recordings could not
+    be made (nothing of theirs is on disk). failures: "split/name" -> cause; paths: what `make_dataset` would
+    have returned, without them."""
+
+    def __init__(self, failures: dict[str, str], paths: dict[str, list[Path]]) -> None:
+        super().__init__(f"{len(failures)} recording(s) failed: " + "; ".join(f"{k}: {v}" for k, v in failures.items()))
+        self.failures = failures
+        self.paths = paths
 
 
 def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
@@ -194,7 +186,8 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
         preset: a `crowdsim.presets.PRESETS` name: each recording's config is drawn from it (base is unused);
             its metadata records "name@version".
 
-    Returns the trajectory file paths of each split, in job order (scenario-major, then seed).
+    Returns the trajectory file paths of each split, in job order (scenario-major, then seed). A recording whose
+    worker process died twice (local pool) is not written; the others are, then DatasetIncomplete names it.
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
@@ -212,11 +205,18 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
     else:
         results = run_local(jobs, workers or 1)
     paths: dict[int, Path] = {}
+    failures: dict[str, str] = {}
     with closing(results), tqdm(total=len(jobs), desc="dataset", unit="recording", disable=not progress) as bar:
         for i, files in results:
-            paths[i] = write_files(Path(out_dir) / jobs[i].split, files)["trajectories"]
+            if isinstance(files, WorkerDied):
+                failures[f"{jobs[i].split}/{jobs[i].name}"] = str(files)
+            else:
+                paths[i] = write_files(Path(out_dir) / jobs[i].split, files)["trajectories"]
             bar.update(1)
     out: dict[str, list[Path]] = {s: [] for s in SPLITS}
     for i, job in enumerate(jobs):
-        out[job.split].append(paths[i])
+        if i in paths:
+            out[job.split].append(paths[i])
+    if failures:
+        raise DatasetIncomplete(failures, out)
     return out

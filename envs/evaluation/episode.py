@@ -177,6 +177,12 @@ def _error_record(task: EpisodeTask, policy_name: str, exc: BaseException) -> Ep
                          fingerprint=task.fingerprint)
 
 
+def error_record(task: EpisodeTask, message: str) -> EpisodeRecord:
+    """The error record of a task that produced no episode (e.g. its worker process died twice), with `message`."""
+    return EpisodeRecord(policy=task.policy.name, seed=int(task.seed), outcome="error", cell=task.cell,
+                         error=message, fingerprint=task.fingerprint)
+
+
 _CACHE: dict[bytes, _Runner] = {}  # per process: runners by settings (few distinct ones per run)
 
 
