@@ -6,6 +6,7 @@ import argparse
 import json
 import os
 import sys
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
@@ -51,14 +52,22 @@ def _spec(args: argparse.Namespace) -> RunSpec:
     return RunSpec(args.duration, args.warmup, args.seed)
 
 
-def _check_out_dir(path: Path) -> None:
-    """ValueError unless `path` is (or can be created as) a writable folder; nothing is created here."""
+def _check_out_dir(path: Path, subfolders: tuple[str, ...] = ()) -> None:
+    """ValueError unless `path` (and each of its `subfolders`) is, or can be created as, a folder this process can
+    write into. Tried for real (a probe folder made and removed at once in the nearest existing ancestor), since
+    permission bits do not tell: root may write anywhere, yet not under /proc or on a read-only mount. Leaves
+    nothing behind."""
+    for folder in (path, *(path / s for s in subfolders)):
+        if folder.exists() and not folder.is_dir():
+            raise ValueError(f"--out {path}: {folder} is a file, not a folder")
     for p in (path, *path.parents):
         if p.exists():
             if not p.is_dir():
                 raise ValueError(f"--out {path}: {p} is a file, not a folder")
-            if not os.access(p, os.W_OK):
-                raise ValueError(f"--out {path}: {p} is not writable")
+            try:
+                os.rmdir(tempfile.mkdtemp(prefix=".crowdsim-probe-", dir=p))
+            except OSError as exc:
+                raise ValueError(f"--out {path}: cannot create folders in {p} ({exc.strerror or exc})") from None
             return
 
 
@@ -238,7 +247,7 @@ def _dataset(args: argparse.Namespace) -> int:
         _config(args, s)
         if args.preset:
             sample_config(get_preset(args.preset), s, args.seed)  # a scenario the preset lacks: error now
-    _check_out_dir(args.out)
+    _check_out_dir(args.out, SPLITS)
     try:
         out = make_dataset(args.out, scenarios, args.seeds_per_scenario, base, spec, backend=args.backend,
                            workers=args.workers, address=args.address, preset=args.preset)
