@@ -20,7 +20,16 @@ from pathlib import Path
 from typing import Any
 
 from crowdsim.cli import OneLineParser, show_defaults  # the CLI conventions, shared with crowdsim
-from envs.cli_options import add_backend_options, add_policy_options, check_backend, default_workers, policy_configs
+from envs.cli_options import (
+    OBSERVATION_POLICIES,
+    add_backend_options,
+    add_policy_options,
+    check_backend,
+    default_workers,
+    ignored_flag,
+    policy_configs,
+    reads_observation,
+)
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.evaluation.suite import DEFAULT_DATA
 from envs.rl import train as train_module
@@ -152,6 +161,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise UsageError("--episodes must be >= 1, --seed and --record >= 0")
     check_backend(args)
     configs = policy_configs(args)
+    if args.wall_rays is not None and not any(reads_observation(n) for n in args.policy):
+        readers = [*OBSERVATION_POLICIES, "sb3:PATH.zip", "module:factory policies"]  # they act on the observation
+        raise ignored_flag("--wall-rays", args.policy, readers)
     config = _config(args)
     check_writable_dir(args.out)
     if args.json is not None:

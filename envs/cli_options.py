@@ -1,7 +1,10 @@
 """Shared `crowdnav` options: the flags that map onto `PolicyConfig` and the run backend, and their checks.
 
 Every flag has a default shown in --help; a misspelt flag, an unknown name or a flag that the chosen policy
-ignores is an error (one line on stderr, exit 2), raised before any episode runs.
+ignores is an error (one line on stderr, exit 2), raised before any episode runs. Which policy reads which flag:
+`POLICY_FLAGS` (registry policies), `SB3_FLAGS` (`sb3:PATH.zip`); a `module:factory` plug-in receives the whole
+`PolicyConfig`, so it may read any. With several policies a flag applies to those that read it (the others keep
+their defaults, and their results say so); a flag that none of the chosen policies reads is an error.
 """
 
 from __future__ import annotations
@@ -12,8 +15,48 @@ from dataclasses import fields, replace
 from typing import Any
 
 from envs.evaluation.pool import BACKENDS
-from envs.policies import ENV_MPC, POLICIES, PREDICTOR_POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
-from envs.policies.plugins import is_plugin
+from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
+from envs.policies.plugins import SB3_PREFIX, is_plugin
+
+# flag -> the `PolicyConfig` field it sets
+FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-every": "replan_every_steps",
+               "--threads": "threads", "--mpc": "mpc"}
+# registry policy -> the flags it reads (envs.policies.registry: mpc-gpgraph loads a torch predictor and draws
+# samples; the baseline MPCs re-plan on their own predictions; social-force acts every step, random reads nothing;
+# ppo-crowdnav is an SB3 agent). PolicyConfig.deterministic has no flag.
+POLICY_FLAGS: dict[str, tuple[str, ...]] = {
+    "mpc-gpgraph": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
+    "mpc-cv": ("--replan-every", "--mpc"),
+    "mpc-none": ("--replan-every", "--mpc"),
+    "social-force": (),
+    "random": (),
+    "ppo-crowdnav": ("--threads",),
+}
+SB3_FLAGS = ("--threads",)
+OBSERVATION_POLICIES = ("ppo-crowdnav",)  # registry policies acting on the observation (as sb3: and plug-ins do)
+
+
+def flags_read(name: str) -> tuple[str, ...]:
+    """The policy flags the policy `name` reads (a plug-in: all of them)."""
+    if is_plugin(name):
+        return tuple(FLAG_FIELDS)
+    if name.startswith(SB3_PREFIX):
+        return SB3_FLAGS
+    return POLICY_FLAGS.get(name, ())
+
+
+def reads_observation(name: str) -> bool:
+    """Whether the policy acts on the env's observation (so that --wall-rays can matter to it)."""
+    return is_plugin(name) or name.startswith(SB3_PREFIX) or name in OBSERVATION_POLICIES
+
+
+class DefaultInt(int):
+    """A flag's default value that remembers it was not given on the command line (`given`)."""
+
+
+def given(value: object) -> bool:
+    """Whether a flag's value came from the command line (not its default: None, [] or a `DefaultInt`)."""
+    return value is not None and value != [] and not isinstance(value, DefaultInt)
 
 
 def default_workers() -> int:
@@ -27,17 +70,19 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
     p.add_argument("--predictor", default=None, metavar="NAME",
                    help="for mpc-gpgraph and plug-in policies: predictor name, checkpoint path or module:factory "
                    "(default: the shipped gpgraph-stgcnn-synthetic)")
-    p.add_argument("--samples", type=int, default=PolicyConfig.n_samples, metavar="K",
-                   help="predicted samples per plan")
-    p.add_argument("--replan-every", type=int, default=REPLAN_EVERY_STEPS, metavar="STEPS",
-                   help="env steps between re-plans")
-    p.add_argument("--threads", type=int, default=PolicyConfig.threads, help="torch threads per process")
+    p.add_argument("--samples", type=int, default=DefaultInt(PolicyConfig.n_samples), metavar="K",
+                   help="predicted samples per plan (mpc-gpgraph, plug-ins)")
+    p.add_argument("--replan-every", type=int, default=DefaultInt(REPLAN_EVERY_STEPS), metavar="STEPS",
+                   help="env steps between re-plans (mpc-gpgraph, mpc-cv, mpc-none, plug-ins)")
+    p.add_argument("--threads", type=int, default=DefaultInt(PolicyConfig.threads),
+                   help="torch threads per process (mpc-gpgraph, ppo-crowdnav, sb3: agents, plug-ins)")
     p.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE",
                    help="override an MPCConfig field of the MPC policies (repeatable), e.g. safety_margin_m=0.4")
 
 
 def add_backend_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=int, default=default_workers(), help="processes (1: in this process)")
+    p.add_argument("--workers", type=int, default=DefaultInt(default_workers()),
+                   help="processes (1: in this process); with --backend ray, the CPUs of the local Ray instance")
     p.add_argument("--backend", choices=BACKENDS, default="local",
                    help="local process pool or Ray tasks (the 'ray' extra)")
     p.add_argument("--address", default=None, metavar="auto|HOST:PORT",
@@ -65,21 +110,32 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
+def ignored_flag(flag: str, names: list[str], readers: list[str]) -> ValueError:
+    """The error for a flag that none of the chosen policies `names` reads (`readers`: the policies that do)."""
+    return ValueError(f"{flag} is ignored by {', '.join(names)}: it applies only to "
+                      f"{', '.join(readers[:-1])}{' and ' if len(readers) > 1 else ''}{readers[-1]}")
+
+
+def _readers(flag: str) -> list[str]:
+    names = [n for n, flags in POLICY_FLAGS.items() if flag in flags]
+    return [*names, *(["sb3:PATH.zip"] if flag in SB3_FLAGS else []), "module:factory policies"]
+
+
 def policy_configs(args: argparse.Namespace) -> list[PolicyConfig]:
-    """The `PolicyConfig`s the flags describe (ValueError on a bad or ignored flag)."""
+    """The `PolicyConfig`s the flags describe, each flag set only for the policies that read it (`flags_read`).
+    ValueError on a bad value, or on a flag that none of the chosen policies reads."""
     if len(set(args.policy)) != len(args.policy):
         raise ValueError("a policy is named twice")
-    if args.mpc and not any(n.startswith("mpc-") or is_plugin(n) for n in args.policy):
-        raise ValueError("--mpc applies only to the MPC policies (mpc-gpgraph, mpc-cv, mpc-none) and plug-ins")
-    mpc = replace(ENV_MPC, **_mpc_overrides(args.mpc))
-    configs = [PolicyConfig(name=n, mpc=mpc, replan_every_steps=args.replan_every, n_samples=args.samples,
-                            threads=args.threads) for n in args.policy]
-    if args.predictor is not None:
-        takes = [c for c in configs if c.name in PREDICTOR_POLICIES or is_plugin(c.name)]
-        if not takes:
-            raise ValueError("--predictor applies only to mpc-gpgraph and module:factory policies")
-        configs = [replace(c, predictor=args.predictor) if c in takes else c for c in configs]
-    return configs
+    values = {"--predictor": args.predictor, "--samples": args.samples, "--replan-every": args.replan_every,
+              "--threads": args.threads, "--mpc": args.mpc}
+    chosen = {flag: value for flag, value in values.items() if given(value)}
+    for flag in chosen:
+        if not any(flag in flags_read(n) for n in args.policy):
+            raise ignored_flag(flag, args.policy, _readers(flag))
+    if "--mpc" in chosen:
+        chosen["--mpc"] = replace(ENV_MPC, **_mpc_overrides(args.mpc))
+    return [PolicyConfig(name=n, **{FLAG_FIELDS[f]: v for f, v in chosen.items() if f in flags_read(n)})
+            for n in args.policy]
 
 
 def check_backend(args: argparse.Namespace) -> None:
@@ -87,6 +143,8 @@ def check_backend(args: argparse.Namespace) -> None:
         raise ValueError("--workers must be >= 1")
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address needs --backend ray")
+    if args.address is not None and given(args.workers):
+        raise ValueError("--workers is ignored with --address: the Ray cluster's CPUs run the episodes")
     if args.backend == "ray":
         from envs.evaluation.pool import require_ray
 

@@ -169,13 +169,20 @@ TINY = ["--episodes", "1", "--workers", "1", "--record", "0", "--no-progress", "
 
 
 @pytest.mark.parametrize(("args", "needle"), [
-    (["--policy", "random", "--predictor", "gpgraph-stgcnn-hotel"], "--predictor applies only"),
-    (["--policy", "social-force", "--mpc", "safety_margin_m=0.5"], "--mpc applies only"),
+    (["--policy", "random", "--predictor", "gpgraph-stgcnn-hotel"], "--predictor is ignored by random"),
+    (["--policy", "social-force", "--mpc", "safety_margin_m=0.5"], "--mpc is ignored by social-force"),
+    (["--policy", "social-force", "--samples", "5"], "--samples is ignored by social-force"),
+    (["--policy", "mpc-cv", "--samples", "5"], "--samples is ignored by mpc-cv"),
+    (["--policy", "mpc-cv", "mpc-none", "--threads", "2"], "--threads is ignored by mpc-cv, mpc-none"),
+    (["--policy", "random", "social-force", "--replan-every", "3"], "--replan-every is ignored by random, social"),
+    (["--policy", "mpc-cv", "--samples", "20"], "--samples is ignored"),  # given, even at its default value
+    (["--policy", "mpc-cv", "--wall-rays", "8"], "--wall-rays is ignored by mpc-cv"),
+    (["--policy", "random", "--backend", "ray", "--address", "auto", "--workers", "3"], "--workers is ignored"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin=0.5"], "FIELD one of"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=wide"], "not a float"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=-1"], "safety_margin_m"),
     (["--policy", "mpc-cv", "mpc-cv"], "named twice"),
-    (["--policy", "mpc-cv", "--samples", "0"], "n_samples"),
+    (["--policy", "mpc-gpgraph", "--samples", "0"], "n_samples"),
     (["--policy", "random", "--address", "auto"], "--address needs --backend ray"),
     (["--policy", "random", "--invisible", "--scenario", "replay", "--replay-file", "x.txt"], "do not apply"),
     (["--policy", "random", "--frame-step", "0.6"], "need --scenario replay"),
@@ -208,3 +215,26 @@ def test_policy_flags_reach_the_results_json(tmp_path):
     assert saved["policy_config"]["mpc"]["safety_margin_m"] == 0.45
     assert saved["policy_config"]["mpc"]["shield_horizon_s"] == 1.6  # the env's MPC, not the planner default
     assert saved["policy_config"]["replan_every_steps"] == 2
+
+
+def test_every_registry_policy_states_the_flags_it_reads():
+    from envs.cli_options import FLAG_FIELDS, POLICY_FLAGS
+    from envs.policies import POLICIES, PREDICTOR_POLICIES
+
+    assert set(POLICY_FLAGS) == set(POLICIES)  # a new policy must say which flags it reads
+    assert all(set(flags) <= set(FLAG_FIELDS) for flags in POLICY_FLAGS.values())
+    assert {n for n, flags in POLICY_FLAGS.items() if "--predictor" in flags} == set(PREDICTOR_POLICIES)
+
+
+def test_a_flag_applies_to_the_policies_that_read_it_and_the_others_keep_their_defaults():
+    from envs.cli import build_parser
+    from envs.cli_options import policy_configs
+
+    args = build_parser().parse_args(["evaluate", "--policy", "mpc-gpgraph", "mpc-cv", "social-force",
+                                      "--samples", "5", "--replan-every", "3", "--mpc", "safety_margin_m=0.45"])
+    gp, cv, sf = policy_configs(args)
+    assert (gp.n_samples, gp.replan_every_steps, gp.mpc.safety_margin_m) == (5, 3, 0.45)
+    assert (cv.n_samples, cv.replan_every_steps, cv.mpc.safety_margin_m) == (20, 3, 0.45)
+    assert sf == PolicyConfig("social-force")  # what its results JSON records: the settings it ran with
+    plain = build_parser().parse_args(["evaluate", "--policy", "mpc-cv"])
+    assert policy_configs(plain) == [PolicyConfig("mpc-cv")]  # no flag given: the defaults (and their fingerprints)
