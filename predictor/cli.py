@@ -134,13 +134,16 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    """The packaged checkpoints, one name per line, then the model-free baseline."""
+    """The packaged checkpoints and the model-free baseline: one line each, the name (what --checkpoint and
+    load_predictor take) then what it is, from the checkpoint's own metadata (`predictor.catalog`)."""
     from predictor.api import CONSTANT_VELOCITY_NAMES
-    from predictor.checkpoint import PACKAGE_CHECKPOINTS
+    from predictor.catalog import catalog
 
-    for path in sorted(PACKAGE_CHECKPOINTS.glob("*.safetensors")):
-        print(path.name[: -len(".safetensors")])
-    print(CONSTANT_VELOCITY_NAMES[0])
+    rows = catalog()
+    assert rows[-1][0] == CONSTANT_VELOCITY_NAMES[0]
+    width = max(len(name) for name, _ in rows)
+    for name, text in rows:
+        print(f"{name:<{width}}  {text}")
     return 0
 
 
@@ -283,7 +286,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
     _group_calibration(r)
     r.set_defaults(func=cmd_predict)
-    ls = sub.add_parser("list", help="print the packaged predictor names (usable wherever a checkpoint is asked for)")
+    ls = sub.add_parser("list", help="the packaged predictors, one a line: the name (usable wherever a checkpoint "
+                        "is asked for) and what it is (model, grouping, training data, validation loss, role)")
     ls.set_defaults(func=cmd_list)
     for command in sub.choices.values():
         show_defaults(command)

@@ -172,7 +172,8 @@ def test_list_prints_every_packaged_name_and_each_loads(capsys) -> None:
     from predictor.checkpoint import PACKAGE_CHECKPOINTS
 
     assert main(["list"]) == 0
-    names = capsys.readouterr().out.split()
+    names = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert len(names) == len(set(names))
     assert set(names) == {p.stem for p in PACKAGE_CHECKPOINTS.glob("*.safetensors")} | {"constant-velocity"}
     assert "gpgraph-stgcnn-synthetic" in names
     load_predictor(names[0]), load_predictor(names[-1])  # the listed names are what load_predictor takes
