@@ -70,7 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--time-limit", type=float, default=None, metavar="S", help="episode time limit, s (default 40)")
     e.add_argument("--wall-rays", type=int, default=None, metavar="R",
                    help="observe R range rays to the walls (for agents trained with crowdnav train --wall-rays R)")
-    e.add_argument("--record", type=int, default=2, metavar="R", help="rerun recordings of the first R episodes")
+    e.add_argument("--record", type=int, default=0, metavar="R",
+                   help="rerun recordings (.rrd) of the first R episodes (about 11 MB per plaza episode)")
     e.add_argument("--replay-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: ETH/UCY-format trajectory file (frame ped x y)")
     e.add_argument("--frame-step", type=float, default=None, metavar="S",

@@ -3,7 +3,7 @@
 Episodes use seeds seed, seed + 1, ..., seed + episodes - 1 (the env's `reset(seed)` fixes the crowd and the
 robot's route, so every policy meets the same episodes) and run through `envs.evaluation.pool` (local process pool by
 default, or Ray). Outputs in `out_dir`: `<stem>.json` (the returned summary), `<stem>.md`, `<stem>.png`
-(rates and example trajectories) and `<stem>_seed<S>.rrd` for the first `record` episodes. Metric
+(rates and example trajectories) and `<stem>_seed<S>.rrd` for the first `record` episodes (none by default). Metric
 definitions: the README's "Evaluation metrics (envs)" and `envs.evaluation.stats.aggregate`.
 """
 
@@ -60,14 +60,15 @@ def check_setup(policy: PolicyConfig, config: CrowdNavConfig) -> None:
 
 
 def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int = 20, seed: int = 0, workers: int = 1,
-             record: int = 2, out_dir: str | Path | None = None, *, stem: str | None = None, draw: int = N_DRAWN,
+             record: int = 0, out_dir: str | Path | None = None, *, stem: str | None = None, draw: int = N_DRAWN,
              progress: bool = True, backend: str = "local", address: str | None = None,
              check: bool = True) -> dict[str, Any]:
     """Evaluate a policy (a name, or a `PolicyConfig`) on episodes seed .. seed + episodes - 1.
 
     Args:
         workers: processes (or Ray CPUs for a local Ray); 1 runs in this process. Records do not depend on it.
-        record: the first `record` episodes are written as rerun recordings (needs `out_dir`).
+        record: the first `record` episodes are written as rerun recordings (needs `out_dir`; about 11 MB per
+            plaza episode, so none by default).
         out_dir: where `<stem>.json/.md/.png` and the recordings go (checked before any episode); None: no files.
         stem: file name stem of the outputs (default: the policy name).
         draw: episodes drawn in the PNG's trajectories panels (the first ones).

@@ -238,3 +238,19 @@ def test_a_flag_applies_to_the_policies_that_read_it_and_the_others_keep_their_d
     assert sf == PolicyConfig("social-force")  # what its results JSON records: the settings it ran with
     plain = build_parser().parse_args(["evaluate", "--policy", "mpc-cv"])
     assert policy_configs(plain) == [PolicyConfig("mpc-cv")]  # no flag given: the defaults (and their fingerprints)
+
+
+def test_no_recording_unless_asked(tmp_path):
+    """A plaza recording is ~11 MB per episode: `crowdnav evaluate` and `evaluate()` record none by default."""
+    import inspect
+
+    from envs.cli import build_parser
+
+    assert build_parser().parse_args(["evaluate", "--policy", "random"]).record == 0
+    assert inspect.signature(evaluate).parameters["record"].default == 0
+    code = main(["evaluate", "--policy", "random", "--episodes", "2", "--workers", "1", "--no-progress",
+                 "--pedestrians", "4", "--time-limit", "2", "--out", str(tmp_path)])
+    assert code == 0 and (tmp_path / "random.json").is_file()
+    assert not list(tmp_path.rglob("*.rrd"))
+    assert json.loads((tmp_path / "random.json").read_text())["run"]["files"] == ["random.json", "random.md",
+                                                                                   "random.png"]
