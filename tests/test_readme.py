@@ -1,4 +1,5 @@
-"""The README as a tested document: every Python block runs as written, and does what its comments say."""
+"""The README and the reference pages in docs/ as tested documents: every Python block runs as written, prints
+what it made, and does what its comments say; every `crowdsim` / `gpgraph` / `crowdnav` command parses and runs."""
 
 from __future__ import annotations
 
@@ -8,34 +9,60 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+# The README, then the per-package reference moved out of it (each block and command is tested the same way).
+DOCS = [README, *(ROOT / "docs" / f"{name}.md" for name in ("crowdsim", "predictor", "planner", "envs", "rl", "data"))]
 
 
-def python_blocks() -> list[str]:
-    return re.findall(r"^```python\n(.*?)^```", README.read_text(), flags=re.S | re.M)
+def python_blocks() -> list[tuple[str, str]]:
+    """(file name, code) of every ```python block of the documents, in order."""
+    return [(doc.name if doc == README else f"docs/{doc.name}", code) for doc in DOCS
+            for code in re.findall(r"^```python\n(.*?)^```", doc.read_text(), flags=re.S | re.M)]
 
 
-def _block(first_line: str) -> str:
-    found = [b for b in python_blocks() if first_line in b]
-    assert len(found) == 1, f"no single README block containing {first_line!r}"
+def _block(first_line: str) -> tuple[str, str]:
+    found = [b for b in python_blocks() if first_line in b[1]]
+    assert len(found) == 1, f"no single documented block containing {first_line!r}"
     return found[0]
 
 
-def _run(code: str, tmp_path: Path, monkeypatch) -> dict:
+def _run(block: tuple[str, str], tmp_path: Path, monkeypatch) -> dict:
     monkeypatch.chdir(tmp_path)  # blocks that write files write here
     namespace: dict = {"__name__": "readme_block"}
-    exec(compile(code, "README.md", "exec"), namespace)
+    exec(compile(block[1], block[0], "exec"), namespace)
     return namespace
 
 
 def test_every_python_block_is_covered_here():
-    assert len(python_blocks()) == 5  # crowdsim, planner, predictor, env, plug-in (tests/envs/test_plugins.py)
+    where = [name for name, _ in python_blocks()]
+    # README: one episode, the plug-in (tests/envs/test_plugins.py); docs: crowdsim, predictor, planner, env
+    assert where == ["README.md", "README.md", "docs/crowdsim.md", "docs/predictor.md", "docs/planner.md",
+                     "docs/envs.md"]
 
 
-def test_crowdsim_block(tmp_path, monkeypatch):
+def test_the_readme_is_short_and_its_links_resolve():
+    assert len(README.read_text().splitlines()) <= 200
+    for doc in [*DOCS, *sorted((ROOT / "docs").rglob("*.md")), ROOT / "RESULTS.md", ROOT / "BENCHMARKS.md"]:
+        for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", doc.read_text()):
+            if "://" not in target:
+                assert (doc.parent / target).exists(), f"{doc.relative_to(ROOT)} links to missing {target}"
+
+
+def test_episode_block(tmp_path, monkeypatch, capsys):
+    ns = _run(_block("from envs.evaluation.evaluate import evaluate"), tmp_path, monkeypatch)
+    assert ns["result"]["episodes"] == 1 and ns["episode"]["outcome"] in ("success", "collision", "timeout")
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert re.fullmatch(r"mpc-cv, plaza, seed 0: (success|collision|timeout) after \d+\.\d s, "
+                        r"closest person -?\d+\.\d\d m, \d+ plans", line), line
+
+
+def test_crowdsim_block(tmp_path, monkeypatch, capsys):
     ns = _run(_block("from crowdsim import CrowdSimulator"), tmp_path, monkeypatch)
     state = ns["state"]
     assert state.pos.shape[1] == 2 and state.active.sum() == 40 and np.isfinite(state.pos[state.active]).all()
+    groups = int(state.group_id[state.active].max()) + 1
+    assert capsys.readouterr().out == f"40 pedestrians in {groups} groups after 40 s\n" and 1 < groups < 40
 
 
 def test_planner_block(tmp_path, monkeypatch, capsys):
@@ -46,11 +73,13 @@ def test_planner_block(tmp_path, monkeypatch, capsys):
     assert callable(ns["baseline"].plan)
 
 
-def test_predictor_block_feeds_the_planner(tmp_path, monkeypatch):
+def test_predictor_block_feeds_the_planner(tmp_path, monkeypatch, capsys):
     ns = _run(_block("from predictor import load_predictor"), tmp_path, monkeypatch)
     assert ns["out"].samples.shape == (20, 12, 3, 2) and ns["result"].status == "solved"
+    groups = int(ns["out"].group_id.max()) + 1
+    assert capsys.readouterr().out == f"20 futures of 3 pedestrians in {groups} predicted groups; plan solved\n"
     np.testing.assert_array_equal(np.load(tmp_path / "out" / "hist.npy"), ns["history"])
-    # ... and the README's `gpgraph predict` line runs as written on that file
+    # ... and the documented `gpgraph predict` line runs as written on that file
     from predictor.cli import main
 
     (argv,) = [c for c in cli_commands() if c[:2] == ["gpgraph", "predict"]]
@@ -59,28 +88,33 @@ def test_predictor_block_feeds_the_planner(tmp_path, monkeypatch):
         assert z["samples"].shape == (20, 12, 3, 2)
 
 
-def test_env_block(tmp_path, monkeypatch):
+def test_env_block(tmp_path, monkeypatch, capsys):
     ns = _run(_block("import gymnasium as gym"), tmp_path, monkeypatch)
     assert ns["reward"] == pytest.approx(sum(ns["info"]["reward_terms"].values()))
     assert ns["frame"].shape == (480, 480, 3) and ns["frame"].dtype == np.uint8
+    seen, terms = int(ns["obs"]["pedestrian_mask"].sum()), len(ns["info"]["reward_terms"])
+    assert capsys.readouterr().out == (f"{seen} pedestrians in view; reward {ns['reward']:+.3f} from {terms} terms; "
+                                       f"frame (480, 480, 3)\n") and 0 < seen <= 20
 
 
 def cli_commands() -> list[list[str]]:
-    """Every `crowdsim` / `gpgraph` / `crowdnav` command in the README's bash blocks, as argv lists; optional
-    parts shown in [brackets] are included (without the brackets), comments dropped."""
+    """Every `crowdsim` / `gpgraph` / `crowdnav` command in the bash blocks of the README and docs/, as argv
+    lists, each once, in order; optional parts shown in [brackets] are included (without the brackets),
+    comments dropped."""
     import shlex
 
     commands = []
-    for block in re.findall(r"^```bash\n(.*?)^```", README.read_text(), flags=re.S | re.M):
-        for line in block.replace("\\\n", " ").splitlines():
-            tokens = shlex.split(line.split(" #")[0].replace("[", " ").replace("]", " "))
-            if tokens and tokens[0] in ("crowdsim", "gpgraph", "crowdnav"):
-                commands.append(tokens)
+    for doc in DOCS:
+        for block in re.findall(r"^```bash\n(.*?)^```", doc.read_text(), flags=re.S | re.M):
+            for line in block.replace("\\\n", " ").splitlines():
+                tokens = shlex.split(line.split(" #")[0].replace("[", " ").replace("]", " "))
+                if tokens and tokens[0] in ("crowdsim", "gpgraph", "crowdnav") and tokens not in commands:
+                    commands.append(tokens)
     return commands
 
 
 def test_every_readme_command_line_is_a_valid_invocation():
-    """Each README command parses with its CLI as written (options exist, values have the right types)."""
+    """Each documented command parses with its CLI as written (options exist, values have the right types)."""
     from crowdsim.cli import build_parser as crowdsim_parser
     from envs.cli import build_parser as crowdnav_parser
     from predictor.cli import build_parser as gpgraph_parser
@@ -92,7 +126,8 @@ def test_every_readme_command_line_is_a_valid_invocation():
         parsers[argv[0]]().parse_args(argv[1:])  # SystemExit (exit 2) on any unknown or malformed option
 
 
-# Shortened only through documented options (README: "Every CLI example in it runs in a test with small sizes").
+# Shortened only through documented options (README: "Every command of this README and of docs/ runs in the test
+# suite with small sizes").
 SMALL = {"--duration": "6", "--pedestrians": "8", "--seeds-per-scenario": "3", "--episodes": "1", "--workers": "1",
          "--epochs": "1", "--trials": "1", "--record": "0", "--time-limit": "4"}
 ADD = {("gpgraph", "train"): ["--max-windows", "16", "--quiet"], ("crowdnav", "benchmark"): ["--no-progress"],
@@ -101,7 +136,7 @@ ADD = {("gpgraph", "train"): ["--max-windows", "16", "--quiet"], ("crowdnav", "b
 
 
 def _small(argv: list[str], shared: Path, tmp_path: Path) -> list[str] | None:
-    """The README command with small sizes, the shared data's real path, and a real recording for `rec.txt`;
+    """The documented command with small sizes, the shared data's real path, and a real recording for `rec.txt`;
     None for what cannot run here (a Ray cluster address). `--backend ray` runs on the default local pool here
     (Ray itself is tested in tests/envs/test_benchmark.py and tests/crowdsim/test_distributed.py)."""
     if "--address" in argv:
@@ -125,9 +160,12 @@ def _small(argv: list[str], shared: Path, tmp_path: Path) -> list[str] | None:
             out += ["--envs", "2", "--n-steps", "128", "--batch-size", "64", "--n-epochs", "1", "--eval-episodes", "1",
                     "--eval-every-steps", "256", "--demo-episodes", "1", "--dagger-rounds", "1", "--dagger-episodes",
                     "1", "--bc-epochs", "1", "--demo-policy", "mpc-cv"]
-    if argv[:2] == ["crowdnav", "benchmark"]:  # the smallest cell of the suite and the cheapest policies
-        out[out.index("--cells") + 1] = "corridor-low-visible"
-        out[out.index("--policy") + 1: out.index("--policy") + 5] = ["mpc-cv", "social-force"]
+    if argv[:2] == ["crowdnav", "benchmark"]:  # the smallest cell of the suite (or the smoke suite) and cheap policies
+        if "--cells" in out:
+            out[out.index("--cells") + 1] = "corridor-low-visible"
+        start = out.index("--policy") + 1
+        stop = next((i for i in range(start, len(out)) if out[i].startswith("--")), len(out))
+        out[start:stop] = ["mpc-cv", "social-force"]
     return out + ADD.get(tuple(argv[:2]), [])
 
 
@@ -154,7 +192,7 @@ def test_every_readme_command_runs_with_small_sizes(tmp_path, monkeypatch, capsy
         if small is None:
             continue
         if small[:2] == ["gpgraph", "evaluate"] and small[3] == "runs/hotel/best.pt":
-            assert Path("runs/hotel/best.pt").is_file()  # made by the README's train line just before
+            assert Path("runs/hotel/best.pt").is_file()  # made by the documented train line just before
         assert mains[small[0]](small[1:]) == 0, (small, capsys.readouterr().err)
         ran += 1
     assert ran >= 13
