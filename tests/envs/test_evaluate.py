@@ -254,3 +254,21 @@ def test_no_recording_unless_asked(tmp_path):
     assert not list(tmp_path.rglob("*.rrd"))
     assert json.loads((tmp_path / "random.json").read_text())["run"]["files"] == ["random.json", "random.md",
                                                                                    "random.png"]
+
+
+def test_demo_still_writes_its_one_recording(tmp_path, monkeypatch, capsys):
+    """`crowdnav demo`'s documented output includes demo.rrd (one episode), whatever evaluate's default. The
+    demo's episodes are swapped for one small random one here; the recording request is the demo's own."""
+    pytest.importorskip("rerun")
+    import envs.evaluation.evaluate as evaluate_module
+
+    real, asked = evaluate_module.evaluate, []
+
+    def small(policy, config, episodes, seed, workers, record, out, **kw):
+        asked.append(record)
+        return real("random", SMALL, 1, seed, 1, record, out, **kw)
+
+    monkeypatch.setattr(evaluate_module, "evaluate", small)
+    assert main(["demo", "--out", str(tmp_path), "--episodes", "1", "--workers", "1", "--no-progress"]) == 0
+    assert asked == [1] and [p.name for p in tmp_path.glob("*.rrd")] == ["demo.rrd"]
+    assert (tmp_path / "demo.rrd").stat().st_size > 1000
