@@ -75,7 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--replay-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: ETH/UCY-format trajectory file (frame ped x y)")
     e.add_argument("--frame-step", type=float, default=None, metavar="S",
-                   help="scenario replay: seconds per annotation step (default 0.4; biwi_eth: 0.6667)")
+                   help="scenario replay: seconds per annotation step (default: the known ETH/UCY recording's "
+                   "own by file name, biwi_eth 0.6667 and the others 0.4; any other file 0.4)")
     e.add_argument("--groups-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: group file (one group of ped ids per line)")
     add_backend_options(e)
@@ -124,10 +125,13 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
             raise UsageError("--scenario replay needs --replay-file PATH")
         if args.pedestrians is not None or args.invisible:
             raise UsageError("--pedestrians and --invisible do not apply to --scenario replay (recorded people)")
-        from envs.replay import ReplayConfig
+        from envs.replay import ReplayConfig, known_frame_step
 
-        rkw = {"frame_step_s": args.frame_step} if args.frame_step is not None else {}
-        kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file, **rkw)
+        known = known_frame_step(args.replay_file)
+        if args.frame_step is not None and known is not None and abs(args.frame_step - known) > 0.01 * known:
+            print(f"crowdnav: warning: {args.replay_file.name} is annotated every {known} s; replaying it at "
+                  f"--frame-step {args.frame_step} s instead", file=sys.stderr)
+        kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file, frame_step_s=args.frame_step)
     elif args.replay_file is not None or args.groups_file is not None or args.frame_step is not None:
         raise UsageError("--replay-file/--groups-file/--frame-step need --scenario replay")
     else:

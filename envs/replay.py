@@ -7,7 +7,9 @@ time (gaps inside a track are bridged by the interpolation). When the recording 
 env's time limit ends the episode (`finished` tells when no pedestrian will appear again).
 
 Times: the recording's time 0 is its first frame id; one annotation step (the most common positive difference
-of consecutive distinct frame ids, unless given) lasts `frame_step_s`. The episode starts at `start_time_s` of
+of consecutive distinct frame ids, unless given) lasts `frame_step_s`: given, or taken from `KNOWN_FRAME_STEPS_S`
+by the file's name (biwi_eth 0.6667 s, the other ETH/UCY recordings 0.4 s), or else 0.4 s (the ETH/UCY format's
+convention, which crowdsim's exports follow). The episode starts at `start_time_s` of
 the recording, fixed or drawn at `reset`; `CrowdState.time_s` counts from the episode start.
 """
 
@@ -24,6 +26,22 @@ from crowdsim.state import CrowdState
 from predictor.ethucy import read_groups, read_trajectories  # the one ETH/UCY reader (torch-free)
 
 START_MODES = ("random", "fixed")
+DEFAULT_FRAME_STEP_S = 0.4  # the ETH/UCY format's annotation step (frame ids +10 per 0.4 s); crowdsim exports use it
+# Seconds per annotation step of the known recordings, by file stem (a `_train`/`_val` suffix of the benchmark's
+# split files is ignored). biwi_eth is the exception: its frame ids advance by 10 per ~0.667 s (the original
+# annotation steps 6 frames at 2.5 fps, the benchmark counts 10); the suites state the same values per cell.
+KNOWN_FRAME_STEPS_S = {
+    "biwi_eth": 0.6667, "biwi_hotel": 0.4, "crowds_zara01": 0.4, "crowds_zara02": 0.4, "crowds_zara03": 0.4,
+    "students001": 0.4, "students003": 0.4, "uni_examples": 0.4,
+}
+
+
+def known_frame_step(path: Path | str) -> float | None:
+    """The annotation step (s) of a known recording (`KNOWN_FRAME_STEPS_S`) by its file name; None if unknown."""
+    stem = Path(path).stem
+    for suffix in ("_train", "_val", "_test"):
+        stem = stem.removesuffix(suffix)
+    return KNOWN_FRAME_STEPS_S.get(stem)
 _SNAP = 1e-9  # times within this many annotation steps of a whole step are snapped onto it
 
 
@@ -35,7 +53,9 @@ class ReplayConfig:
         path: trajectory file, rows `frame ped x y` (m), tab- or whitespace-separated.
         groups_path: optional group file, one group per line (ped ids separated by whitespace); a pedestrian
             not listed is its own group. None: every pedestrian is alone.
-        frame_step_s: seconds per annotation step (0.4 s: the benchmark convention; about 0.667 s in biwi_eth).
+        frame_step_s: seconds per annotation step; None (the default): the known recording's own
+            (`known_frame_step`: biwi_eth 0.6667, the other ETH/UCY files 0.4), else `DEFAULT_FRAME_STEP_S`.
+            The config holds the resolved value.
         frame_increment: frame-id increment per annotation step; None infers it from the file.
         dt_s: time one env step advances, s.
         ped_radius_m: body radius given to every pedestrian, m.
@@ -56,7 +76,7 @@ class ReplayConfig:
 
     path: Path | str
     groups_path: Path | str | None = None
-    frame_step_s: float = 0.4
+    frame_step_s: float | None = None
     frame_increment: float | None = None
     dt_s: float = 0.1
     ped_radius_m: float = 0.25
@@ -73,6 +93,8 @@ class ReplayConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "path", Path(self.path))
+        if self.frame_step_s is None:
+            object.__setattr__(self, "frame_step_s", known_frame_step(self.path) or DEFAULT_FRAME_STEP_S)
         if self.groups_path is not None:
             object.__setattr__(self, "groups_path", Path(self.groups_path))
         for key in ("frame_step_s", "dt_s", "ped_radius_m"):

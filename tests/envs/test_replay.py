@@ -265,3 +265,59 @@ def test_replays_a_benchmark_file():
         assert states[k].n_active == present[int(np.searchsorted(frames, f))]
         for _, p, x, y in rows:
             np.testing.assert_array_equal(got[int(p)], [x, y])
+
+
+# ------------------------------------------------------------------------------------------ annotation rate
+def test_the_frame_step_of_a_known_recording_comes_from_its_name(tmp_path):
+    from envs.replay import DEFAULT_FRAME_STEP_S, KNOWN_FRAME_STEPS_S
+
+    assert DEFAULT_FRAME_STEP_S == 0.4 and KNOWN_FRAME_STEPS_S["biwi_eth"] == pytest.approx(0.6667)
+    steps = {name: ReplayConfig(path=tmp_path / name).frame_step_s
+             for name in ("biwi_eth.txt", "biwi_eth_train.txt", "biwi_eth_val.txt", "biwi_hotel.txt",
+                          "crowds_zara01.txt", "students003.txt", "uni_examples_train.txt", "rec.txt")}
+    assert steps == {"biwi_eth.txt": 0.6667, "biwi_eth_train.txt": 0.6667, "biwi_eth_val.txt": 0.6667,
+                     "biwi_hotel.txt": 0.4, "crowds_zara01.txt": 0.4, "students003.txt": 0.4,
+                     "uni_examples_train.txt": 0.4, "rec.txt": 0.4}  # unknown files: the format's 0.4 s
+    assert ReplayConfig(path=tmp_path / "biwi_eth.txt", frame_step_s=0.4).frame_step_s == 0.4  # given wins
+    assert ReplayConfig(path="biwi_eth.txt") == ReplayConfig(path="biwi_eth.txt", frame_step_s=0.6667)
+    # the rate is what the replay runs at: 3 annotated steps of biwi_eth last 2.0001 s, of another file 1.2 s
+    rows = "".join(f"{10 * k}\t1\t{k:.1f}\t0.0\n" for k in range(4))
+    eth, other = (ReplayCrowd(ReplayConfig(path=_write(tmp_path, rows, n))) for n in ("biwi_eth.txt", "other.txt"))
+    assert eth.duration_s == pytest.approx(3 * 0.6667) and other.duration_s == pytest.approx(1.2)
+
+
+def test_the_suites_state_the_same_rates_and_their_cells_are_unchanged():
+    """The benchmark cells give frame_step_s explicitly; the table agrees with every one of them, so a replay of
+    the same file without --frame-step runs exactly as the suite's cell does."""
+    from envs.evaluation.suite import load_suite, suite_names
+    from envs.replay import known_frame_step
+
+    seen = 0
+    for name in suite_names():
+        for cell in load_suite(name).cells:
+            if cell.is_real:
+                for seed in cell.seeds[:2]:
+                    replay = cell.env_config(seed).replay
+                    assert replay.frame_step_s == cell.spec["frame_step_s"]
+                    assert known_frame_step(replay.path) == cell.spec["frame_step_s"], (name, cell.name)
+                    seen += 1
+    assert seen >= 20
+
+
+def test_cli_replay_of_biwi_eth_runs_at_its_own_rate_unless_told(tmp_path, capsys):
+    from envs.cli import main
+
+    rows = "".join(f"{10 * k}\t{p}\t{0.3 * k:.2f}\t{4.0 * p}\n" for k in range(60) for p in (1, 2))
+    path = _write(tmp_path, rows, "biwi_eth.txt")
+    base = ["evaluate", "--policy", "random", "--scenario", "replay", "--replay-file", str(path), "--episodes", "1",
+            "--workers", "1", "--time-limit", "2", "--no-progress"]
+    assert main([*base, "--out", str(tmp_path / "a")]) == 0
+    assert capsys.readouterr().err == ""
+    import json
+
+    saved = json.loads((tmp_path / "a" / "random.json").read_text())
+    assert saved["config"]["replay_frame_step_s"] == 0.6667
+    assert main([*base, "--frame-step", "0.4", "--out", str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "warning" in err[0] and "0.6667" in err[0]
+    assert json.loads((tmp_path / "b" / "random.json").read_text())["config"]["replay_frame_step_s"] == 0.4
