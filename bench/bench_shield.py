@@ -18,15 +18,11 @@ env's 0.1 s closed loop; use them as a sanity check, not a safety result).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).parent))
-from bench_planner import GOALS, PRED_DT_S, Crowd
+from bench_planner import GOALS, PRED_DT_S, Crowd  # the sibling script (this folder is sys.path[0] when run)
 
 from planner import CROWD_MPC, MPCPlanner, PedPrediction, step_robot
 

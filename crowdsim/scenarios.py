@@ -111,10 +111,6 @@ def _check_rect(name: str, what: str, rect: Rect, walls: np.ndarray) -> None:
             raise ValueError(f"scenario {name}: {what} area {rect} lies across the wall {a.tolist()}-{b.tolist()}")
 
 
-def _box(x0: float, y0: float, x1: float, y1: float) -> list[list[list[float]]]:
-    return [[[x0, y0], [x1, y0]], [[x1, y0], [x1, y1]], [[x1, y1], [x0, y1]], [[x0, y1], [x0, y0]]]
-
-
 def corridor(opt: Mapping[str, float]) -> Scenario:
     """Bidirectional corridor, length x width (default 20 x 4 m). `periodic=1` makes it a one-way ring
     (every pedestrian walks +x and wraps at the end), used to hold a fixed density."""

@@ -127,6 +127,14 @@ def ratio(num: float, den: float) -> float:
     return float(num) / float(den) if den else float("nan")
 
 
+def f1(precision: float | None, recall: float | None) -> float:
+    """Harmonic mean of precision and recall (e.g. PW or G-MITRE F1); NaN when either is missing (None or NaN),
+    0 when both are 0."""
+    if precision is None or recall is None or precision != precision or recall != recall:
+        return float("nan")
+    return 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+
+
 class GroupScores:
     """Accumulates PW and G-MITRE counts over windows."""
 

@@ -10,8 +10,16 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
+
+
+def nan_to_none(v: Any) -> Any:
+    """``v`` with every NaN float (nested in dicts) replaced by None, for strict JSON result files."""
+    if isinstance(v, dict):
+        return {k: nan_to_none(x) for k, x in v.items()}
+    return None if isinstance(v, float) and v != v else v
 
 
 def load_results(folder: str | Path) -> dict[tuple[str, str, str], dict]:

@@ -27,8 +27,10 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from predictor import metrics
-from predictor.api import ConstantVelocityConfig, ConstantVelocityPredictor
 from predictor.cli import split_folder
+from predictor.evaluate import evaluate_constant_velocity as evaluate_cv
+from predictor.metrics import f1
+from predictor.report import nan_to_none
 from predictor.windows import has_labels, load_windows
 
 PROXIMITY_RADII_M = (0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0)  # the rule family of issue 11: 0.5-2 m
@@ -54,20 +56,6 @@ def proximity_scores(windows: list) -> dict[str, dict[str, float]]:
     return out
 
 
-def nan_to_none(v):
-    """``v`` with every NaN float (nested in dicts) replaced by None, for strict JSON."""
-    if isinstance(v, dict):
-        return {k: nan_to_none(x) for k, x in v.items()}
-    return None if isinstance(v, float) and v != v else v
-
-
-def f1(precision: float | None, recall: float | None) -> float:
-    """Harmonic mean of precision and recall; NaN when either is missing (None or NaN), 0 when both are 0."""
-    if precision is None or recall is None or precision != precision or recall != recall:
-        return float("nan")
-    return 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
-
-
 def best_rule(scores: dict[str, dict[str, float]]) -> dict:
     """The rule of ``proximity_scores`` with the highest PW F1 (NaN counts as lowest), with both F1s."""
     def pw_f1(item: tuple[str, dict]) -> float:
@@ -77,32 +65,6 @@ def best_rule(scores: dict[str, dict[str, float]]) -> dict:
     name, s = max(scores.items(), key=pw_f1)
     return {"rule": name, **s, "pw_f1": f1(s["pw_precision"], s["pw_recall"]),
             "gmitre_f1": f1(s["gmitre_precision"], s["gmitre_recall"])}
-
-
-def evaluate_cv(windows: list, seed: int, trials: int, n_samples: int) -> dict:
-    """Metrics dict shaped like ``predictor.evaluate.evaluate``'s, for the constant-velocity predictor."""
-    rng = np.random.default_rng(seed)
-    cv = ConstantVelocityPredictor()
-    exact = ConstantVelocityPredictor(ConstantVelocityConfig(step_noise_m=0.0))
-    totals, k1, n_peds = np.zeros(4), np.zeros(2), 0
-    groups = metrics.GroupScores() if has_labels(windows) else None
-    for w in windows:
-        for _ in range(trials):
-            samples = cv.predict(w.obs, n_samples=n_samples, rng=rng).samples
-            ade, fde = metrics.ade_fde(samples, w.pred)
-            totals += [ade.sum(), fde.sum(), metrics.col(samples).sum(), metrics.tcc(samples, w.pred).sum()]
-        ade1, fde1 = metrics.ade_fde(exact.predict(w.obs, n_samples=1).samples, w.pred)
-        k1 += [ade1.sum(), fde1.sum()]
-        n_peds += w.n_peds
-        if groups is not None:
-            groups.add(w.group_id, np.arange(w.n_peds))
-    ade, fde, col, tcc = (totals / (n_peds * trials)).tolist()
-    result = {"ade": ade, "fde": fde, "col": col, "tcc": tcc}
-    if groups is not None:
-        result.update(groups.result())
-    result.update(ade_k1=k1[0] / n_peds, fde_k1=k1[1] / n_peds, protocol="constant-velocity", seed=seed,
-                  n_samples=n_samples, trials=trials, windows=len(windows), pedestrians=n_peds)
-    return result
 
 
 def main(argv: list[str] | None = None) -> int:

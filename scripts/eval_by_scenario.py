@@ -21,11 +21,9 @@ import torch
 from predictor.checkpoint import load_model
 from predictor.cli import split_folder
 from predictor.evaluate import EvalConfig, evaluate
+from predictor.evaluate import evaluate_constant_velocity as evaluate_cv
 from predictor.sampling import PROTOCOLS
 from predictor.windows import load_windows
-
-sys.path.insert(0, str(Path(__file__).parent))
-from eval_baselines import evaluate_cv
 
 KEYS = ("ade", "fde", "col", "tcc", "pw_precision", "pw_recall", "gmitre_precision", "gmitre_recall")
 

@@ -30,11 +30,10 @@ from predictor.checkpoint import load_model
 from predictor.cli import SPLITS, group_threshold_scale_arg, split_folder
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.grouping import THRESHOLD_MODES
+from predictor.metrics import f1
+from predictor.report import nan_to_none
 from predictor.sampling import PROTOCOLS
 from predictor.windows import load_windows
-
-sys.path.insert(0, str(Path(__file__).parent))
-from eval_baselines import f1, nan_to_none
 
 DEFAULT_SCALES = (0.3, 0.4, 0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95, 1.0, 1.1, 1.25)
 

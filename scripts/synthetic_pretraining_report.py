@@ -117,12 +117,18 @@ def best_seed(val_dir: Path, variant: str, scene: str) -> int:
     return min(scores, key=scores.get)
 
 
+USAGE = "usage: synthetic_pretraining_report.py EVAL_DIR | best-seed VAL_DIR VARIANT SCENE"
+
+
 def main(argv: list[str]) -> int:
+    if argv in (["-h"], ["--help"]):
+        print(f"{USAGE}\n\n{__doc__}")
+        return 0
     if len(argv) == 4 and argv[0] == "best-seed":
         print(best_seed(Path(argv[1]), argv[2], argv[3]))
         return 0
     if len(argv) != 1 or not Path(argv[0]).is_dir():
-        print("usage: synthetic_pretraining_report.py EVAL_DIR | best-seed VAL_DIR VARIANT SCENE", file=sys.stderr)
+        print(USAGE, file=sys.stderr)
         return 2
     res = load(Path(argv[0]))
     for protocol in ("iid", "paper"):

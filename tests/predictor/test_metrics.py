@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictor.metrics import GroupScores, ade_fde, col, interpolate, mitre_counts, pw_counts, ratio, tcc
+from predictor.metrics import GroupScores, ade_fde, col, f1, interpolate, mitre_counts, pw_counts, ratio, tcc
+from predictor.report import nan_to_none
 
 
 def _mitre(truth: list[int], pred: list[int]) -> tuple[float, float]:
@@ -95,3 +96,32 @@ def test_report_table_averages_scenes(tmp_path) -> None:
         (tmp_path / f"gpgraph-stgcnn-{scene}-iid.json").write_text(json.dumps(res))
     text = table(load_results(tmp_path), "iid")
     assert "| gpgraph-stgcnn | 0.10/0.20 |" in text and "0.300/0.200" in text
+
+
+@pytest.mark.parametrize("precision, recall, expected", [
+    (0.5, 1.0, 2 / 3), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), (None, 0.5, float("nan")), (float("nan"), 0.5, float("nan")),
+])
+def test_f1_is_the_harmonic_mean_and_nan_when_undefined(precision, recall, expected) -> None:
+    np.testing.assert_equal(f1(precision, recall), expected)
+
+
+def test_nan_to_none_reaches_nested_dicts_only_for_nan() -> None:
+    assert nan_to_none({"a": float("nan"), "b": {"c": float("nan"), "d": 1.5}, "e": "x", "f": 0.0}) == {
+        "a": None, "b": {"c": None, "d": 1.5}, "e": "x", "f": 0.0}
+
+
+def test_constant_velocity_evaluation_is_exact_on_straight_walkers() -> None:
+    """Pedestrians walking straight at constant speed: the noise-free extrapolation is exact (ADE/FDE k1 = 0),
+    the noisy samples are not, and the all-singletons grouping scores PW precision NaN (no predicted pairs)."""
+    from predictor.evaluate import evaluate_constant_velocity
+    from predictor.windows import Window
+
+    t = np.arange(20)[:, None] * 0.4
+    traj = np.stack([np.hstack([t * 1.2, np.full_like(t, k * 3.0)]) for k in range(3)], axis=1)  # (20, 3, 2)
+    w = Window(obs=traj[:8], pred=traj[8:], ped_ids=np.arange(3), group_id=np.array([0, 0, 1]))
+    r = evaluate_constant_velocity([w], seed=0, trials=2, n_samples=20)
+    assert r["ade_k1"] == pytest.approx(0.0, abs=1e-9) and r["fde_k1"] == pytest.approx(0.0, abs=1e-9)
+    assert 0 < r["ade"] < r["fde"] < 1.0
+    assert (r["pedestrians"], r["windows"], r["trials"], r["protocol"]) == (3, 1, 2, "constant-velocity")
+    assert r["pw_recall"] == 0.0 and r["pw_precision"] != r["pw_precision"]
+    assert nan_to_none(evaluate_constant_velocity([w], seed=0, trials=2, n_samples=20)) == nan_to_none(r)  # seeded

@@ -1,6 +1,6 @@
 """Why does GP-Graph over-merge? Score other ways of turning its learned pair distances into groups (diagnostic).
 
-    python scripts/diagnose_grouping.py --checkpoint gpgraph-stgcnn-synthetic --data out/synthetic_predictor/data \
+    python -m experiments.diagnose_grouping --checkpoint gpgraph-stgcnn-synthetic --data out/synthetic_predictor/data \
         --split val --json out/synthetic_predictor/eval/threshold/diagnose-val.json
 
 Group metrics only (no sampling, so no ADE/FDE): one forward pass of the group assigner gives the learned pair
@@ -32,10 +32,9 @@ from predictor import grouping, metrics
 from predictor.batch import collate
 from predictor.checkpoint import load_model
 from predictor.cli import SPLITS, split_folder
+from predictor.metrics import f1
+from predictor.report import nan_to_none
 from predictor.windows import load_windows
-
-sys.path.insert(0, str(Path(__file__).parent))
-from eval_baselines import f1, nan_to_none
 
 SCALES = (0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5)
 METHODS = ("components", "official", "average", "complete")
