@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.config import CrowdNavConfig
+from envs.config import DEFAULT_PREDICTOR, CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.policies import GPGraphPolicy, act, make_policy
 from planner import MPCConfig
@@ -35,7 +35,7 @@ def build_policy(name: str, env: CrowdNavEnv) -> tuple[Any, str]:
         return make_policy(name, env), "-"
     try:
         policy = make_policy(name, env)
-        return policy, "default (gpgraph-stgcnn-synthetic)"
+        return policy, f"default ({DEFAULT_PREDICTOR})"
     except Exception as exc:  # the synthetic checkpoint may not be packaged yet
         print(f"note: mpc-gpgraph default predictor did not load ({type(exc).__name__}: {str(exc)[:80]}...); "
               f"using GPGraphPolicy(config, predictor={FALLBACK_PREDICTOR!r})")

@@ -6,7 +6,7 @@ Public API: `SimConfig` (and its parts), `CrowdSimulator`, `CrowdState`, `make_s
 
 __version__ = "0.1.0"
 
-from crowdsim.config import GroupConfig, GroupForceParams, RobotConfig, SimConfig, SocialForceParams
+from crowdsim.config import GroupConfig, GroupForceParams, RobotSlot, SimConfig, SocialForceParams
 from crowdsim.scenarios import SCENARIOS, make_scenario
 from crowdsim.sim import CrowdSimulator
 from crowdsim.state import CrowdState
@@ -17,7 +17,7 @@ __all__ = [
     "CrowdState",
     "GroupConfig",
     "GroupForceParams",
-    "RobotConfig",
+    "RobotSlot",
     "SimConfig",
     "SocialForceParams",
     "__version__",

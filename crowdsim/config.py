@@ -209,7 +209,7 @@ class BehaviourConfig:
 
 
 @dataclass(frozen=True)
-class RobotConfig:
+class RobotSlot:
     """The external agent slot. `visible` makes pedestrians repel from the robot like from a person."""
 
     visible: bool = True
@@ -230,7 +230,7 @@ class SimConfig:
 
     scenario: str = "plaza"
     n_pedestrians: int = 40
-    record_dt_s: float = 0.4
+    record_dt_s: float = 0.4  # the ETH/UCY step; twin of predictor.ethucy.STEP_S (tests/test_shared_facts.py)
     force_dt_s: float = 0.1
     physics_substeps: int = 4
     radius_min_m: float = 0.22
@@ -240,7 +240,7 @@ class SimConfig:
     group_forces: GroupForceParams = field(default_factory=GroupForceParams)
     groups: GroupConfig = field(default_factory=GroupConfig)
     behaviour: BehaviourConfig = field(default_factory=BehaviourConfig)
-    robot: RobotConfig = field(default_factory=RobotConfig)
+    robot: RobotSlot = field(default_factory=RobotSlot)
     scenario_options: tuple[tuple[str, float], ...] = ()  # scenario-specific overrides (name, value)
 
     def __post_init__(self) -> None:

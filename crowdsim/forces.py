@@ -70,7 +70,8 @@ def pedestrian_acc(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.nda
 
 
 def closest_points_on_segments(pos: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """(N, S, 2) closest point on each segment (S, 2, 2) to each position (N, 2)."""
+    """(N, S, 2) closest point on each segment (S, 2, 2) to each position (N, 2). A declared twin of
+    `planner.segment_projection` (crowdsim may not import the planner), checked in tests/test_shared_facts.py."""
     a = segments[:, 0]
     ab = segments[:, 1] - a
     len2 = np.maximum(np.einsum("sk,sk->s", ab, ab), _EPS)

@@ -12,6 +12,9 @@ from planner import RobotConfig
 
 GROUP_SOURCES = ("truth", "predicted")
 REPLAY_SCENARIO = "replay"
+# The predictor mpc-gpgraph uses and the observation's predictions come from, unless one is named: the shipped
+# crowdsim-trained GP-Graph (RESULTS.md, "Default synthetic predictor"). Defined here only.
+DEFAULT_PREDICTOR = "gpgraph-stgcnn-synthetic"
 
 
 def _finite(obj: object, names: tuple[str, ...]) -> None:
@@ -79,7 +82,7 @@ class ObservationConfig:
     group_source: str = "truth"
     predictions: bool = False
     n_prediction_samples: int = 3
-    predictor: str = "gpgraph-stgcnn-synthetic"
+    predictor: str = DEFAULT_PREDICTOR
     wall_rays: int = 0
     wall_range_m: float = 5.0
 
@@ -158,7 +161,7 @@ class CrowdNavConfig:
             raise ValueError("scenario 'replay' needs replay=ReplayConfig(path=...)")
         if not isinstance(self.robot, RobotConfig):
             raise TypeError(f"CrowdNavConfig.robot must be planner.RobotConfig (the robot's kinematic limits), got "
-                            f"{type(self.robot).__module__}.{type(self.robot).__name__}; crowdsim.RobotConfig "
+                            f"{type(self.robot).__module__}.{type(self.robot).__name__}; crowdsim.RobotSlot "
                             "describes the robot as the crowd sees it and is built by the env")
         if self.n_pedestrians < 1:
             raise ValueError(f"n_pedestrians must be >= 1, got {self.n_pedestrians}")
@@ -185,10 +188,10 @@ class CrowdNavConfig:
 
     def sim_config(self) -> SimConfig:
         """The crowdsim config stepped at dt_s (forces every min(dt, 0.1) s)."""
-        from crowdsim import RobotConfig as SimRobot
+        from crowdsim import RobotSlot
 
         return SimConfig(
             scenario=self.scenario, n_pedestrians=self.n_pedestrians, record_dt_s=self.dt_s,
             force_dt_s=min(self.dt_s, 0.1), groups=self.groups, scenario_options=self.scenario_options,
-            robot=SimRobot(visible=self.robot_visible, radius_m=self.robot.radius_m),
+            robot=RobotSlot(visible=self.robot_visible, radius_m=self.robot.radius_m),
         )

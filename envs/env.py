@@ -303,7 +303,8 @@ class CrowdNavEnv(gym.Env):
             self._predictor = load_predictor(self.config.observation.predictor)
         hist = self.history_window()
         if hist.shape[1] == 0:
-            self._pred_samples, self._pred_groups = np.zeros((1, 12, 0, 2)), np.zeros(0, np.int64)
+            self._pred_samples = np.zeros((1, self.timing.pred_len, 0, 2))
+            self._pred_groups = np.zeros(0, np.int64)
             return
         k = self.config.observation.n_prediction_samples
         pred = self._predictor.predict(hist, n_samples=k, rng=self._pred_rng)

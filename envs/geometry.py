@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 
+from planner import point_segment_distances as planner_segment_distances
+
 
 def swept_distances(robot0: np.ndarray, robot1: np.ndarray, peds0: np.ndarray, peds1: np.ndarray) -> np.ndarray:
     """Closest centre distances (N,) m over one step, robot moving robot0 -> robot1 (2,) and pedestrians
@@ -24,14 +26,9 @@ def swept_distances(robot0: np.ndarray, robot1: np.ndarray, peds0: np.ndarray, p
 
 
 def point_segment_distances(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
-    """Distances (S,) m from point p (2,) to segments segs (S, 2, 2)."""
-    if len(segs) == 0:
-        return np.zeros(0)
-    a, b = segs[:, 0], segs[:, 1]
-    ab = b - a
-    t = np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
-    closest = a + np.clip(t, 0.0, 1.0)[:, None] * ab
-    return np.linalg.norm(p - closest, axis=1)
+    """Distances (S,) m from point p (2,) to segments segs (S, 2, 2): the planner's computation
+    (`planner.point_segment_distances`, the project's one), on the env's (S, 2, 2) layout."""
+    return planner_segment_distances(p, np.asarray(segs, float).reshape(-1, 4))
 
 
 def ray_distances(origin: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: float) -> np.ndarray:
@@ -97,7 +94,9 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
 
 
 def _segment_distance(px: float, py: float, a: tuple[float, float], b: tuple[float, float]) -> float:
-    """`point_segment_distances` of one segment a -> b, on floats (the same operations)."""
+    """`point_segment_distances` of one segment a -> b on Python floats: a scalar twin for the per-step convex-hull
+    test, where numpy's per-call overhead dominates (`envs.kernels` compiles the same operations); checked against
+    the planner's vectorised one in tests/envs/test_env_fast_paths.py."""
     abx, aby = b[0] - a[0], b[1] - a[1]
     den = abx * abx + aby * aby
     t = ((px - a[0]) * abx + (py - a[1]) * aby) / (den if den > 1e-12 else 1e-12)

@@ -1,8 +1,9 @@
 """The prediction timing every part of the env agrees on: the 0.4 s step, 8 observed and 12 predicted steps.
 
 It is read from the loaded predictor (`PredictionTiming.of(predictor)`: its `step_s`, `obs_len` and `pred_len`
-attributes) and defaults to the ETH/UCY protocol that the packaged predictors follow (`DEFAULT_TIMING`). The
-env's history, observation and the planner view all take it from here.
+attributes) and defaults to the ETH/UCY protocol that the packaged predictors follow (`DEFAULT_TIMING`, built from
+its one definition in `predictor.ethucy`). The env's history, observation and the policies' view all take it
+from here.
 """
 
 from __future__ import annotations
@@ -10,15 +11,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from predictor.ethucy import OBS_LEN, PRED_LEN, STEP_S  # torch-free
+
 
 @dataclass(frozen=True)
 class PredictionTiming:
     """step_s: time between history rows and between predicted steps, s; obs_len: observed rows (the last is
     now); pred_len: predicted steps (+step_s ... +pred_len * step_s)."""
 
-    step_s: float = 0.4
-    obs_len: int = 8
-    pred_len: int = 12
+    step_s: float
+    obs_len: int
+    pred_len: int
 
     def __post_init__(self) -> None:
         if not self.step_s > 0 or self.obs_len < 2 or self.pred_len < 1:
@@ -37,4 +40,4 @@ class PredictionTiming:
             raise ValueError(f"{who} predicts with {other}, but the env runs {self}")
 
 
-DEFAULT_TIMING = PredictionTiming()
+DEFAULT_TIMING = PredictionTiming(STEP_S, OBS_LEN, PRED_LEN)

@@ -7,7 +7,7 @@ Imports numpy and casadi only. Entry points:
   :func:`frozen_prediction`;
 * :func:`robot_dynamics` (the MPC's ``casadi.Function``) and :func:`step_robot` (its bit-identical float
   twin, which the env steps the robot with);
-* baselines via :func:`make_planner` (``mpc``, ``mpc_cv``, ``mpc_frozen``, ``social_force``);
+* baselines via :func:`make_planner` (``mpc``, ``mpc-cv``, ``mpc-none``, ``social-force``);
 * :data:`CROWD_MPC`, the recommended :class:`MPCConfig` among real crowds (crowd-risk options: planner/risk.py).
 """
 
@@ -15,7 +15,7 @@ from planner.baselines import (
     PLANNERS,
     ConstantVelocityMPC,
     FrozenMPC,
-    SocialForceParams,
+    ReactiveForceParams,
     SocialForcePlanner,
     make_planner,
 )
@@ -30,7 +30,7 @@ from planner.prediction import (
     validate_prediction,
 )
 from planner.result import PlanResult, PlanStats
-from planner.scene import polygon_to_segments, select_modes
+from planner.scene import point_segment_distances, polygon_to_segments, segment_projection, select_modes
 
 __all__ = [
     "CROWD_MPC",
@@ -45,8 +45,8 @@ __all__ = [
     "PedPrediction",
     "PlanResult",
     "PlanStats",
+    "ReactiveForceParams",
     "RobotConfig",
-    "SocialForceParams",
     "SocialForcePlanner",
     "brake_control",
     "clip_control",
@@ -55,9 +55,11 @@ __all__ = [
     "frozen_prediction",
     "make_planner",
     "model_dims",
+    "point_segment_distances",
     "polygon_to_segments",
     "robot_dynamics",
     "rollout",
+    "segment_projection",
     "select_modes",
     "step_robot",
     "validate_prediction",

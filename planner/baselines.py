@@ -1,7 +1,7 @@
 """Baselines behind the MPC's interface ``plan(robot_state, goal, prediction, obstacles) -> PlanResult``.
 
-* ``mpc_cv``: the MPC fed constant-velocity predictions built from ``prediction.history``;
-* ``mpc_frozen``: the MPC with pedestrians frozen at their current positions;
+* ``mpc-cv``: the MPC fed constant-velocity predictions built from ``prediction.history``;
+* ``mpc-none``: the MPC with pedestrians frozen at their current positions;
 * ``social_force``: a reactive social-force controller (no optimisation, no prediction).
 
 All take the same :class:`~planner.prediction.PedPrediction` as the MPC and ignore what they do not use.
@@ -23,6 +23,7 @@ from planner.prediction import (
     frozen_prediction,
 )
 from planner.result import PlanResult, PlanStats
+from planner.scene import segment_projection
 
 
 class _PredictionSwapMPC:
@@ -46,7 +47,8 @@ class _PredictionSwapMPC:
         """As :meth:`MPCPlanner.plan`, with the prediction replaced first. An empty scene (N = 0 or no real
         pedestrian) is passed through unchanged; bad input raises ValueError before any work."""
         if prediction is not None:
-            check_inputs(robot_state, goal, prediction, obstacles, self.mpc.dims.state_dim)
+            check_inputs(robot_state, goal, prediction, obstacles, self.mpc.dims.state_dim,
+                         self.mpc.config.dt_s)
             if np.asarray(prediction.mask, bool).any():
                 prediction = self._replace(prediction)
         return self.mpc.plan(robot_state, goal, prediction, obstacles)
@@ -82,7 +84,7 @@ def _frozen(prediction: PedPrediction) -> PedPrediction:
 
 
 @dataclass(frozen=True)
-class SocialForceParams:
+class ReactiveForceParams:
     """Reactive social-force controller parameters (Helbing-style exponential repulsion)."""
 
     desired_speed_mps: float = 1.0
@@ -98,7 +100,7 @@ class SocialForceParams:
         for name in ("desired_speed_mps", "relax_time_s", "slow_radius_m", "ped_range_m", "wall_range_m",
                      "heading_gain"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"SocialForceParams.{name} must be > 0, got {getattr(self, name)!r}")
+                raise ValueError(f"ReactiveForceParams.{name} must be > 0, got {getattr(self, name)!r}")
 
 
 @dataclass
@@ -108,7 +110,7 @@ class SocialForcePlanner:
     horizon_steps; the returned plan is the control held over the horizon."""
 
     config: MPCConfig = field(default_factory=MPCConfig)
-    params: SocialForceParams = field(default_factory=SocialForceParams)
+    params: ReactiveForceParams = field(default_factory=ReactiveForceParams)
     stats: PlanStats = field(default_factory=PlanStats)
 
     def reset(self) -> None:
@@ -117,7 +119,7 @@ class SocialForcePlanner:
     def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
         dims = model_dims(self.config.robot.model)
         state, goal, prediction, obstacles = check_inputs(robot_state, goal, prediction, obstacles,
-                                                          dims.state_dim)
+                                                          dims.state_dim, self.config.dt_s)
         vel = self._velocity(state)
         force = self._goal_force(state[:2], goal, vel) + self._ped_force(state[:2], prediction)
         force = force + self._wall_force(state[:2], obstacles)
@@ -154,9 +156,8 @@ class SocialForcePlanner:
     def _wall_force(self, pos: np.ndarray, obstacles: np.ndarray | None) -> np.ndarray:
         if obstacles is None or len(obstacles) == 0:
             return np.zeros(2)
-        a, ab = obstacles[:, :2], obstacles[:, 2:] - obstacles[:, :2]
-        t = np.clip(((pos - a) * ab).sum(1) / np.maximum((ab * ab).sum(1), 1e-12), 0.0, 1.0)
-        diff = pos - (a + t[:, None] * ab)
+        _, t, ab = segment_projection(pos, obstacles)
+        diff = pos - (obstacles[:, :2] + t[:, None] * ab)
         dist = np.maximum(np.linalg.norm(diff, axis=1), 1e-6)
         mag = self.params.wall_strength_mps2 * np.exp((self.config.robot.radius_m - dist)
                                                       / self.params.wall_range_m)
@@ -176,16 +177,15 @@ class SocialForcePlanner:
 
 PLANNERS = {
     "mpc": MPCPlanner,
-    "mpc_cv": ConstantVelocityMPC,
-    "mpc_frozen": FrozenMPC,
-    "social_force": SocialForcePlanner,
+    "mpc-cv": ConstantVelocityMPC,
+    "mpc-none": FrozenMPC,
+    "social-force": SocialForcePlanner,
 }
 
 
 def make_planner(name: str, config: MPCConfig | None = None):
-    """Build a planner by name; raise ValueError listing the valid names if unknown."""
+    """Build a planner by name; raise ValueError listing the valid names if unknown. The names are the env's policy
+    names for the same planners (`envs.policies` builds its planner policies from this registry)."""
     if name not in PLANNERS:
-        hint = f" (planner names use underscores: {name.replace('-', '_')!r}; the hyphenated names are the env's " \
-            "policies, envs.make_policy)" if name.replace("-", "_") in PLANNERS else ""
-        raise ValueError(f"unknown planner {name!r}; valid names: {', '.join(PLANNERS)}{hint}")
+        raise ValueError(f"unknown planner {name!r}; valid names: {', '.join(PLANNERS)}")
     return PLANNERS[name](config) if config is not None else PLANNERS[name]()

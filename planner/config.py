@@ -151,26 +151,9 @@ class MPCConfig:
 
 
 # Recommended MPC among real (replayed, non-reactive) crowds: a 0.3 m margin at the 0.4 s knots, clearance inflation
-# growing 0.2 m per second of prediction time and 0.5 m per metre of spread of the predictor's samples (capped at
-# 0.5 m), and the safety shield (planner/shield.py: 1.6 s look-ahead at 0.1 s, 0.15 m margin, at most 10% of the
-# samples hit, the last observed velocity always avoided) in place of the MPC's mid-step checks.
-# Tuned only on cells and seeds that no reported result uses (RESULTS.md, "planner benchmark"):
-# - crowds_zara03 / uni_examples, seeds 1100-1179 (scripts/tune_real_crowds.py): the shield with or without mid-step
-#   checks left the same 5/160 (mpc-gpgraph) and 5/160 (mpc-cv) collisions, nearly all tracks that began beside
-#   the robot or walkers of 1.8-2 m/s from the side; without mid-step checks plan-time p95 fell from ~19 to ~12 ms;
-# - crowdsim crossing (60 people) and plaza (64), robot invisible, seeds 1000-1019 (the suite reports 0-9):
-#   collisions 20/20 -> 12/20 and 7/20 -> 2/20 (mpc-gpgraph), 17/20 -> 8/20 and 9/20 -> 6/20 (mpc-cv).
-# Earlier (seeds 1000-1059) the inflation took mpc-gpgraph from 10/120 to 7/120 collisions (not significant); the
-# speed cap and predicted-risk ranking did worse and stay off. Later (uni_examples overlaid 6 times, ~20 people per
-# frame, seeds 1000-1059, `scripts/tune_real_crowds.py --overlay 6`, mpc-gpgraph): shield commitment
-# (shield_hold_weight 0.02 / 0.1) gave 32 / 31 collisions against 24 without it, and stays off (0).
-# 2026-11-25: the 12 nearest pedestrians are constrained instead of 8 (max_peds). In crowds as dense as univ's
-# (uni_examples overlaid 10 times, 30-60 people in view; seeds 1000-1119, mpc-gpgraph) the 8 nearest all stand
-# within a couple of metres and a fast walker closing from further out was left to the shield alone: collisions
-# 48/120 -> 34/120 (discordant 21 vs 7, exact McNemar p = 0.012); 16 gave 15/60 against 16/60 for 12 on seeds
-# 1060-1119 but a plan p95 of 46 ms under load (12: 36 ms). On the tuning suite (`crowdnav-tune`: zara03 and
-# uni_examples as recorded, the dense crowdsim cells at seeds 1000-1019) it changed nothing: 33 vs 31 collisions
-# of 160 (7 vs 5 discordant, p = 0.77). RESULTS.md, "planner benchmark (suite crowdnav-v1, version 4), rerun".
+# with prediction time and sample spread (capped at 0.5 m), the safety shield (planner/shield.py) in place of the
+# MPC's mid-step checks, and the 12 nearest pedestrians constrained. Tuned only on cells and seeds that no reported
+# result uses; how each setting was chosen, with its numbers: docs/decisions/planner-settings.md.
 # Set `robot=` to the env's robot with dataclasses.replace.
 CROWD_MPC = MPCConfig(safety_margin_m=0.3, check_midpoints=False, clearance_growth_mps=0.2, spread_inflation=0.5,
                       max_clearance_inflation_m=0.5, shield_horizon_s=1.6, shield_margin_m=0.15, max_peds=12)

@@ -42,11 +42,12 @@ def check_state_goal(state: np.ndarray, goal: np.ndarray, state_dim: int) -> tup
     return state, goal
 
 
-def check_inputs(state, goal, prediction, obstacles, state_dim: int):
-    """Validate every plan() input before any solver work; raise ValueError with a clear message."""
+def check_inputs(state, goal, prediction, obstacles, state_dim: int, dt_s: float):
+    """Validate every plan() input before any solver work; raise ValueError with a clear message. No prediction
+    (None) is a prediction of nobody, on the plan's own step `dt_s`."""
     state, goal = check_state_goal(state, goal, state_dim)
     if prediction is None:
-        prediction = empty_prediction()
+        prediction = empty_prediction(1, dt_s)
     elif not isinstance(prediction, PedPrediction):
         raise ValueError(f"prediction must be a PedPrediction or None, got {type(prediction).__name__}")
     else:
@@ -86,7 +87,7 @@ class MPCPlanner:
         of polygons (V, 2) m; None = none). Returns the first control and the plan (:class:`PlanResult`).
         Raises ValueError on malformed or non-finite input, before any solver work; never otherwise."""
         state, goal, prediction, obstacles = check_inputs(robot_state, goal, prediction, obstacles,
-                                                          self.dims.state_dim)
+                                                          self.dims.state_dim, self.config.dt_s)
         if self._plan is not None:
             shifted = self._shift(self._plan)
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None

@@ -11,7 +11,7 @@ group_ids     (N,) int        group label; a pedestrian alone is its own group o
 mask          (N,) bool       True where the pedestrian is real; False rows are padding and ignored
 current       (N, 2) or None  positions now (m); if None, extrapolated back from the first two steps
 history       (T_obs, N, 2)   optional observed positions, oldest first, last row = now (baselines)
-step_s        float           time between prediction steps (s), 0.4 for the project's predictor
+step_s        float           time between prediction steps (s); required: the planner assumes none
 ============  ==============  =====================================================================
 
 Values of masked-out pedestrians may be anything, NaN included. Non-finite values of real
@@ -21,7 +21,7 @@ planner calls it before building any solver input).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -36,7 +36,7 @@ class PedPrediction:
     mask: np.ndarray
     current: np.ndarray | None = None
     history: np.ndarray | None = None
-    step_s: float = 0.4
+    step_s: float = field(kw_only=True)  # the predictor's step, s (ETH/UCY: 0.4); never assumed here
 
     def __post_init__(self) -> None:
         validate_prediction(self)
@@ -89,7 +89,7 @@ def validate_prediction(pred: PedPrediction) -> None:
         _check_finite("history", hist.astype(float), mask, 1)
 
 
-def empty_prediction(n_steps: int = 12, step_s: float = 0.4) -> PedPrediction:
+def empty_prediction(n_steps: int, step_s: float) -> PedPrediction:
     """A prediction with no pedestrians (K=1, T=n_steps, N=0)."""
     return PedPrediction(np.zeros((1, n_steps, 0, 2)), np.zeros(0), np.zeros(0, int), np.zeros(0, bool),
                          current=np.zeros((0, 2)), step_s=step_s)
@@ -117,7 +117,7 @@ def _defaults(n: int, radii, group_ids, mask) -> tuple[np.ndarray, np.ndarray, n
 
 def constant_velocity_prediction(history: np.ndarray, radii: np.ndarray | None = None,
                                  group_ids: np.ndarray | None = None, mask: np.ndarray | None = None,
-                                 n_steps: int = 12, step_s: float = 0.4) -> PedPrediction:
+                                 *, n_steps: int, step_s: float) -> PedPrediction:
     """Constant-velocity prediction (K=1) from observed positions ``history`` (T_obs, N, 2), rows
     ``step_s`` apart, last row = now. The velocity is the last displacement / step_s (zero if
     T_obs == 1). Defaults: radii 0.3 m, every pedestrian its own group, all real."""
@@ -135,7 +135,7 @@ def constant_velocity_prediction(history: np.ndarray, radii: np.ndarray | None =
 
 def frozen_prediction(current: np.ndarray, radii: np.ndarray | None = None,
                       group_ids: np.ndarray | None = None, mask: np.ndarray | None = None,
-                      n_steps: int = 12, step_s: float = 0.4) -> PedPrediction:
+                      *, n_steps: int, step_s: float) -> PedPrediction:
     """Pedestrians frozen at ``current`` (N, 2) for n_steps steps (K=1)."""
     now = np.asarray(current, float)
     radii, group_ids, mask = _defaults(now.shape[0], radii, group_ids, mask)

@@ -138,12 +138,22 @@ def group_capsules(pts: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.n
     return a, b, (across + radii).max(-1)
 
 
-def point_segment_distances(p: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """Points p (..., 2), segments seg (W, 4) x0, y0, x1, y1 -> distances (..., W) in m."""
+def segment_projection(p: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points p (..., 2) against segments seg (W, 4) x0, y0, x1, y1: (rel, t, ab) with rel = p - start (..., W, 2) m,
+    t (..., W) the clipped position of the closest point along each segment (0 at its start, 1 at its end) and
+    ab (W, 2) m the segments' vectors: the closest points are start + t ab. The project's one point-to-segment
+    computation (the env's wall checks use it too); crowdsim keeps a twin (crowdsim.forces, it may not import the
+    planner), checked against this one in tests/test_shared_facts.py."""
     a, b = seg[:, :2], seg[:, 2:]
     ab = b - a
     rel = np.asarray(p, float)[..., None, :] - a
     t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    return rel, t, ab
+
+
+def point_segment_distances(p: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Points p (..., 2), segments seg (W, 4) x0, y0, x1, y1 -> distances (..., W) in m."""
+    rel, t, ab = segment_projection(p, seg)
     return np.linalg.norm(rel - t[..., None] * ab, axis=-1)
 
 

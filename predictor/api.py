@@ -14,12 +14,11 @@ import torch
 from predictor.batch import relative
 from predictor.checkpoint import load_model
 from predictor.device import model_device
+from predictor.ethucy import OBS_LEN, PRED_LEN, STEP_S  # the ETH/UCY protocol (one definition)
 from predictor.gaussian import mean_cov
 from predictor.model import GPGraph, check_group_mode, check_group_threshold_scale
 from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
 
-OBS_LEN, PRED_LEN = 8, 12
-STEP_S = 0.4  # seconds between history rows and between predicted steps (the ETH/UCY protocol)
 CONSTANT_VELOCITY_NAMES = ("constant-velocity", "cv")
 
 

@@ -20,13 +20,28 @@ One policy for all readers; anything else raises `DataFormatError` (a `ValueErro
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 
 MAX_ID = 2**53  # ids must be exactly representable in float64
+# The ETH/UCY forecasting protocol (Social-GAN, Social-STGCNN, SGCN, GP-Graph): rows 0.4 s apart, 8 observed rows
+# (3.2 s, the last one now) and 12 predicted steps (4.8 s). The one definition in the project: the predictor
+# windows its data with it, `envs.timing.DEFAULT_TIMING` is built from it, and the planner receives the step as a
+# parameter (`PedPrediction.step_s`). crowdsim's `SimConfig.record_dt_s` default is a declared twin (crowdsim
+# may not import predictor), checked equal in tests/test_shared_facts.py.
+STEP_S = 0.4
+OBS_LEN = 8
+PRED_LEN = 12
 TRAJECTORY_FIELDS = "frame ped x y"
 LABEL_FIELDS = "frame ped group"
+# Where the ETH/UCY data lives (one folder per scene: eth, hotel, univ, zara1, zara2, each with train/val/test in the
+# leave-one-out layout). The one definition in the project: the benchmark suites (`envs.evaluation.suite.DEFAULT_DATA`,
+# `crowdnav --data`), the scripts and the tests use it. Relative to the working folder (the repository root, where the
+# shared data sits beside it at ../shared); the environment variable ETH_UCY_DIR points it elsewhere.
+DATA_DIR_ENV = "ETH_UCY_DIR"
+DEFAULT_DATA_DIR = Path(os.environ.get(DATA_DIR_ENV) or "../shared/datasets/eth_ucy")
 
 
 class DataFormatError(ValueError):

@@ -14,9 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from predictor.data import Recording, read_split
-
-OBS_LEN = 8
-PRED_LEN = 12
+from predictor.ethucy import OBS_LEN, PRED_LEN
 
 
 @dataclass(frozen=True)

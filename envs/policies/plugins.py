@@ -1,6 +1,6 @@
 """User plug-ins: policies and predictors named `module:factory`, and stable-baselines3 agents (`sb3:PATH.zip`).
 
-Protocols (also in the README):
+Protocols (also in docs/envs.md; the README has a worked example):
 
     Policy      name: str; reset(seed) -> None; act(view: envs.view.PolicyView) -> envs.view.Decision;
                 optional `stats` (a `planner.PlanStats`) for plan/fallback/solve-time counts.

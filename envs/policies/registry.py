@@ -30,34 +30,26 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from envs.config import DEFAULT_PREDICTOR
 from envs.env import CrowdNavEnv
 from envs.policies.plugins import SB3_PREFIX, SB3Policy, is_plugin, load_factory
 from envs.timing import PredictionTiming
 from envs.view import Decision, PolicyView
 from planner import (
     CROWD_MPC,
-    ConstantVelocityMPC,
-    FrozenMPC,
     MPCConfig,
     MPCPlanner,
     PedPrediction,
     PlanStats,
-    SocialForcePlanner,
     empty_prediction,
+    make_planner,
 )
 
-DEFAULT_PREDICTOR = "gpgraph-stgcnn-synthetic"
-# The MPC as the env runs it (all MPC policies): `planner.CROWD_MPC`. Pedestrians keep moving between plans
-# (head-on closing speeds reach ~2.5 m/s, i.e. 1 m per 0.4 s), so clearances are also checked half-way through each
-# plan step and the margin is 0.3 m (the planner's own default is 0.1 m at the knots only; on plaza seeds
-# 2000-2059 this took mpc-gpgraph from 59/60 to 60/60 successes). Among replayed real people the clearance also
-# grows with prediction time (0.2 m/s) and with the spread of the predicted samples (0.5 m per m), capped at
-# +0.5 m: on the tuning recordings crowds_zara03 and uni_examples (not in any reported cell, seeds 1000-1059)
-# mpc-gpgraph collided in 7/120 episodes instead of 10/120 (not significant; RESULTS.md).
+# The MPC as the env runs it (all MPC policies): `planner.CROWD_MPC` (its settings and how they were tuned:
+# docs/decisions/planner-settings.md). Re-planned every env step (0.1 s): between 0.4 s ticks the predictor's history
+# is interpolated to end now (`CrowdNavEnv.history_window`), so any interval works; why every step:
+# docs/decisions/replanning.md.
 ENV_MPC = CROWD_MPC
-# Env steps between re-plans. Between 0.4 s ticks the history fed to the predictor is interpolated to end
-# now (`CrowdNavEnv.history_window`), so any interval works; the plan keeps its 0.4 s step. Re-planning every
-# 0.1 s step removed the remaining collisions of re-planning every 0.4 s on the tuning seeds (RESULTS.md).
 REPLAN_EVERY_STEPS = 1
 PREDICTOR_POLICIES = ("mpc-gpgraph",)  # registry policies that take `PolicyConfig.predictor`
 SCENE_TEMPLATE = "{scene}"  # in a predictor name: filled in per benchmark cell (`PolicyConfig.for_cell`)
@@ -244,8 +236,9 @@ Factory = Callable[[PolicyConfig, MPCConfig, CrowdNavEnv], Policy]
 AGENTS_DIR = Path(__file__).parent / "agents"
 
 
-def _planner(name: str, planner_cls: type, every: int | None = None) -> Factory:
-    return lambda cfg, mpc, env: PlannerPolicy(name, planner_cls(mpc), singleton_prediction,
+def _planner(name: str, every: int | None = None) -> Factory:
+    """A planner of `planner.PLANNERS` (the same name) re-planning on singleton predictions."""
+    return lambda cfg, mpc, env: PlannerPolicy(name, make_planner(name, mpc), singleton_prediction,
                                                every or cfg.replan_every_steps)
 
 
@@ -264,9 +257,9 @@ def _agent(name: str) -> Factory:
 POLICIES: dict[str, Factory] = {
     "mpc-gpgraph": lambda cfg, mpc, env: GPGraphPolicy(mpc, cfg.predictor, cfg.n_samples, cfg.threads,
                                                        cfg.replan_every_steps, env.timing),
-    "mpc-cv": _planner("mpc-cv", ConstantVelocityMPC),
-    "mpc-none": _planner("mpc-none", FrozenMPC),
-    "social-force": _planner("social-force", SocialForcePlanner, every=1),
+    "mpc-cv": _planner("mpc-cv"),
+    "mpc-none": _planner("mpc-none"),
+    "social-force": _planner("social-force", every=1),
     "random": lambda cfg, mpc, env: RandomPolicy(),
     "ppo-crowdnav": _agent("ppo-crowdnav"),
 }

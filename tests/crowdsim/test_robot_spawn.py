@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdsim import CrowdSimulator, RobotConfig, SimConfig
+from crowdsim import CrowdSimulator, RobotSlot, SimConfig
 
 
 def test_no_pedestrian_spawns_within_contact_of_a_visible_robot():
-    sim = CrowdSimulator(SimConfig(scenario="corridor", n_pedestrians=30, robot=RobotConfig(visible=True)))
+    sim = CrowdSimulator(SimConfig(scenario="corridor", n_pedestrians=30, robot=RobotSlot(visible=True)))
     sim.reset(seed=3)
     spot = np.array([0.75, 2.0])  # inside the west-east flow's spawn area (x 0..1.5 m, y 0.4..3.6 m)
     seen = set(sim.state().ped_id[sim.state().active].tolist())

@@ -40,6 +40,15 @@ def _hull_reference(points: np.ndarray) -> np.ndarray:
     return np.array(lower[:-1] + upper[:-1])
 
 
+def _segment_distances_reference(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
+    """Distances (S,) from p (2,) to segs (S, 2, 2) with the operations the env's intrusion test has always used
+    (closest = a + t ab; |p - closest|): the scalar and compiled fast paths must equal it bit for bit, so that
+    episodes stay identical. (The planner's vectorised version rounds |(p - a) - t ab| and may differ by an ulp.)"""
+    a, ab = segs[:, 0], segs[:, 1] - segs[:, 0]
+    t = np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    return np.linalg.norm(p - (a + np.clip(t, 0.0, 1.0)[:, None] * ab), axis=1)
+
+
 def _hull_distance_reference(p: np.ndarray, hull: np.ndarray) -> float:
     edges = np.stack([hull, np.roll(hull, -1, axis=0)], axis=1)
     if len(hull) == 2:
@@ -48,7 +57,7 @@ def _hull_distance_reference(p: np.ndarray, hull: np.ndarray) -> float:
         e, rel = edges[:, 1] - edges[:, 0], p - edges[:, 0]
         if np.all(e[:, 0] * rel[:, 1] - e[:, 1] * rel[:, 0] >= 0.0):
             return 0.0
-    return float(point_segment_distances(p, edges).min())
+    return float(_segment_distances_reference(p, edges).min())
 
 
 def test_convex_hull_and_distance_match_reference() -> None:

@@ -6,6 +6,9 @@ import numpy as np
 
 from planner import MPCConfig, PlanResult, step_robot
 
+# The prediction grid the tests use (the project's ETH/UCY protocol; the planner takes it as a parameter).
+STEP_S = 0.4
+PRED = {"n_steps": 12, "step_s": STEP_S}
 # Behaviour tests must not depend on machine load: timing is benchmarked (bench/), not tested here.
 TEST_BUDGET_S = 10.0
 

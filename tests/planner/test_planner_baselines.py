@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from planner_helpers import drive, make_config
+from planner_helpers import PRED, drive, make_config
 
 from planner import PLANNERS, PedPrediction, constant_velocity_prediction, make_planner
 
@@ -16,7 +16,7 @@ def _crossing_walker(step: int, dt: float) -> PedPrediction:
     t_now = step * dt
     times = t_now + 0.4 * np.arange(-7, 1)
     hist = np.stack([np.array([[4.0, -3.0 + 0.8 * t]]) for t in times])
-    return constant_velocity_prediction(hist)
+    return constant_velocity_prediction(hist, **PRED)
 
 
 @pytest.mark.parametrize("name", sorted(PLANNERS))
@@ -28,7 +28,7 @@ def test_every_baseline_reaches_goal_in_empty_space(name):
     assert planner.stats.counts["calls"] == 35
 
 
-@pytest.mark.parametrize("name", ["mpc_cv", "mpc", "social_force"])
+@pytest.mark.parametrize("name", ["mpc-cv", "mpc", "social-force"])
 def test_baselines_avoid_a_crossing_walker(name):
     planner = make_planner(name, make_config())
     dt = planner.config.dt_s
@@ -40,7 +40,7 @@ def test_baselines_avoid_a_crossing_walker(name):
 
 
 def test_frozen_mpc_uses_current_positions_only():
-    planner = make_planner("mpc_frozen", make_config())
+    planner = make_planner("mpc-none", make_config())
     pred = _crossing_walker(0, 0.4)
     result = planner.plan(np.zeros(5), GOAL, pred)
     assert result.status == "solved"

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from planner_helpers import make_config
+from planner_helpers import PRED, STEP_S, make_config
 
 from planner import CROWD_MPC, MPCConfig, MPCPlanner, PedPrediction, constant_velocity_prediction, step_robot
 from planner.scene import build_scene
@@ -23,7 +23,7 @@ def _walker(start: np.ndarray, vel: np.ndarray, t_now: float) -> np.ndarray:
 
 def _scene(t_now: float, walkers: list[tuple[np.ndarray, np.ndarray]]) -> PedPrediction:
     hist = np.concatenate([_walker(np.asarray(p, float), np.asarray(v, float), t_now) for p, v in walkers], axis=1)
-    return constant_velocity_prediction(hist)
+    return constant_velocity_prediction(hist, **PRED)
 
 
 @pytest.mark.parametrize("bad", [{"rank_peds_by": "nearest"}, {"clearance_growth_mps": -0.1},
@@ -50,7 +50,8 @@ def test_clearance_grows_with_time_and_spread_up_to_the_cap():
     # Two samples 1 m apart from 0.4 s on: spread 0.5 m, so the clearance is at the cap throughout.
     pos = np.full((2, 12, 1, 2), [3.0, 0.0])
     pos[1, :, 0, 1] += 1.0
-    wide = PedPrediction(pos, np.full(1, 0.3), np.zeros(1, int), np.ones(1, bool), current=np.array([[3.0, 0.5]]))
+    wide = PedPrediction(pos, np.full(1, 0.3), np.zeros(1, int), np.ones(1, bool), current=np.array([[3.0, 0.5]]),
+                         step_s=STEP_S)
     assert np.allclose(build_scene(np.zeros(2), wide, None, cfg).ped_clear[:, 0], base + 0.45)
 
 

@@ -73,7 +73,7 @@ def test_unknown_names_list_valid_ones():
         RobotConfig(model="diffdrive")
     with pytest.raises(ValueError, match="ipopt, fatrop"):
         MPCConfig(solver="snopt")
-    with pytest.raises(ValueError, match="mpc, mpc_cv, mpc_frozen, social_force"):
+    with pytest.raises(ValueError, match="mpc, mpc-cv, mpc-none, social-force"):
         make_planner("rrt")
     with pytest.raises(ValueError, match="unicycle, holonomic"):
         robot_dynamics("car")

@@ -6,7 +6,7 @@ import dataclasses
 
 import casadi as ca
 import numpy as np
-from planner_helpers import make_config
+from planner_helpers import PRED, STEP_S, make_config
 
 from planner import MPCConfig, MPCPlanner, PedPrediction, brake_control, clip_control, frozen_prediction
 
@@ -68,7 +68,7 @@ def test_nan_solution_falls_back():
 
 def test_wall_time_budget_exceeded_counts_as_timeout():
     planner = MPCPlanner(MPCConfig(solver="ipopt", time_budget_s=1e-6))
-    pred = frozen_prediction(np.array([[4.0, 0.0]]))
+    pred = frozen_prediction(np.array([[4.0, 0.0]]), **PRED)
     result = planner.plan(np.zeros(5), GOAL, pred)
     assert result.status == "timeout" and result.fallback_used
     assert planner.stats.counts["timeout"] == 1
@@ -94,7 +94,7 @@ def test_random_scenes_never_raise_and_respect_bounds():
         positions = rng.uniform(-4, 4, (20, 12, n, 2))
         mask = rng.random(n) < 0.8
         positions[:, :, ~mask] = np.nan
-        pred = PedPrediction(positions, np.full(n, 0.3), rng.integers(0, 3, n), mask)
+        pred = PedPrediction(positions, np.full(n, 0.3), rng.integers(0, 3, n), mask, step_s=STEP_S)
         walls = rng.uniform(-5, 5, (int(rng.integers(0, 4)), 4))
         result = planner.plan(state, rng.uniform(-6, 6, 2), pred, walls)
         assert np.all(np.isfinite(result.control)) and np.all(np.isfinite(result.states))

@@ -7,7 +7,7 @@ import dataclasses
 import casadi as ca
 import numpy as np
 import pytest
-from planner_helpers import drive, make_config
+from planner_helpers import PRED, STEP_S, drive, make_config
 
 from planner import (
     MPCPlanner,
@@ -62,7 +62,7 @@ def test_holonomic_reaches_goal_within_bounds(goal):
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_keeps_clearance_from_pedestrian_on_the_line(solver, goal):
     cfg = make_config(solver=solver)
-    pred = frozen_prediction(np.array([[4.0, 0.0]]), radii=np.array([0.3]))
+    pred = frozen_prediction(np.array([[4.0, 0.0]]), radii=np.array([0.3]), **PRED)
     states, results = drive(MPCPlanner(cfg), np.zeros(5), goal, lambda *_: pred, 30)
     dist = np.linalg.norm(states[:, :2] - [4.0, 0.0], axis=1)
     # Knots keep the full clearance (up to the solver tolerance); between knots the bodies stay apart.
@@ -87,12 +87,12 @@ def test_passes_around_not_between_a_group(solver, goal):
     # Two members 1.8 m apart centre to centre: 1.2 m gap between their bodies, across the path.
     members = np.array([[4.0, 0.9], [4.0, -0.9]])
     cfg = make_config(solver=solver)
-    as_group = frozen_prediction(members, group_ids=np.array([0, 0]))
+    as_group = frozen_prediction(members, group_ids=np.array([0, 0]), **PRED)
     states, _ = drive(MPCPlanner(cfg), np.zeros(5), goal, lambda *_: as_group, 35)
     assert abs(_crossing_side(states, 4.0)) > 0.9 + 0.3 + cfg.robot.radius_m - 0.02
     assert np.linalg.norm(states[-1, :2] - goal) < 0.5
     # Control: the same two people as strangers leave room to pass between them.
-    strangers = frozen_prediction(members, group_ids=np.array([0, 1]))
+    strangers = frozen_prediction(members, group_ids=np.array([0, 1]), **PRED)
     states, _ = drive(MPCPlanner(cfg), np.zeros(5), goal, lambda *_: strangers, 35)
     assert abs(_crossing_side(states, 4.0)) < 0.3
 
@@ -100,7 +100,7 @@ def test_passes_around_not_between_a_group(solver, goal):
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_start_inside_pedestrian_gives_fallback_without_exception(solver, goal):
     planner = MPCPlanner(make_config(solver=solver))
-    pred = frozen_prediction(np.array([[0.2, 0.0]]))
+    pred = frozen_prediction(np.array([[0.2, 0.0]]), **PRED)
     result = planner.plan(np.zeros(5), goal, pred)
     assert result.fallback_used and result.fallback == "brake"
     assert result.status in ("infeasible", "solver_failed", "solver_error", "nan", "timeout")
@@ -119,10 +119,10 @@ class _ExplodingSolver:
 
 def test_nan_in_prediction_raises_before_solver_runs(goal):
     with pytest.raises(ValueError, match="NaN"):
-        frozen_prediction(np.array([[np.nan, 1.0]]))
+        frozen_prediction(np.array([[np.nan, 1.0]]), **PRED)
     planner = MPCPlanner(make_config())
     planner.ocp = dataclasses.replace(planner.ocp, solver=_ExplodingSolver())
-    pred = frozen_prediction(np.array([[4.0, 1.0]]))
+    pred = frozen_prediction(np.array([[4.0, 1.0]]), **PRED)
     pred.positions[0, 3, 0, 1] = np.nan  # corrupt after construction: plan() must re-check
     with pytest.raises(ValueError, match="NaN"):
         planner.plan(np.zeros(5), goal, pred)
@@ -136,7 +136,7 @@ def test_nan_in_prediction_raises_before_solver_runs(goal):
 def test_nan_of_masked_out_pedestrians_is_ignored(goal):
     positions = np.full((1, 12, 2, 2), np.nan)
     positions[:, :, 0] = [6.0, 3.0]
-    pred = PedPrediction(positions, np.array([0.3, np.nan]), np.array([0, 1]), np.array([True, False]))
+    pred = PedPrediction(positions, np.array([0.3, np.nan]), np.array([0, 1]), np.array([True, False]), step_s=STEP_S)
     result = MPCPlanner(make_config()).plan(np.zeros(5), goal, pred)
     assert result.status == "solved"
 
@@ -144,7 +144,7 @@ def test_nan_of_masked_out_pedestrians_is_ignored(goal):
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_same_inputs_give_same_control(solver, goal):
     cfg = make_config(solver=solver)
-    pred = frozen_prediction(np.array([[3.0, 0.3], [5.0, -1.0]]), group_ids=np.array([0, 1]))
+    pred = frozen_prediction(np.array([[3.0, 0.3], [5.0, -1.0]]), group_ids=np.array([0, 1]), **PRED)
     state = np.array([0.0, 0.0, 0.2, 0.5, 0.0])
     first = MPCPlanner(cfg).plan(state, goal, pred)
     planner = MPCPlanner(cfg)
@@ -158,7 +158,7 @@ def test_same_inputs_give_same_control(solver, goal):
 
 def test_plan_agrees_with_the_dynamics_function(goal):
     planner = MPCPlanner(make_config())
-    pred = frozen_prediction(np.array([[4.0, 0.2]]))
+    pred = frozen_prediction(np.array([[4.0, 0.2]]), **PRED)
     result = planner.plan(np.array([0.0, 0.0, 0.3, 0.4, 0.1]), goal, pred)
     assert result.status == "solved"
     replay = [result.states[0]]
@@ -196,7 +196,7 @@ def test_finer_plan_step_interpolates_predictions(goal):
     def walker(step: int, _state) -> PedPrediction:
         now = np.array([[4.0, -2.5 + 0.8 * step * cfg.dt_s]])
         future = now[None, None] + 0.4 * np.arange(1, 13)[None, :, None, None] * np.array([0.0, 0.8])
-        return PedPrediction(future, np.array([0.3]), np.array([0]), np.array([True]), current=now)
+        return PedPrediction(future, np.array([0.3]), np.array([0]), np.array([True]), current=now, step_s=STEP_S)
 
     states, results = drive(planner, np.zeros(5), goal, walker, 60)
     truth = np.array([[4.0, -2.5 + 0.8 * step * cfg.dt_s] for step in range(61)])
@@ -208,7 +208,7 @@ def test_finer_plan_step_interpolates_predictions(goal):
 def test_midpoint_checks_keep_clearance_half_way(goal):
     cfg = make_config(check_midpoints=True)
     planner = MPCPlanner(cfg)
-    pred = frozen_prediction(np.array([[4.0, 0.0]]))
+    pred = frozen_prediction(np.array([[4.0, 0.0]]), **PRED)
     states, results = drive(planner, np.zeros(5), goal, lambda *_: pred, 30)
     pairs = zip(states[:-1], results, strict=True)
     halves = np.array([step_robot(x, r.control, cfg.dt_s / 2)[:2] for x, r in pairs])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from planner_helpers import make_config
+from planner_helpers import PRED, STEP_S, make_config
 
 from planner import PLANNERS, PedPrediction, constant_velocity_prediction, empty_prediction, make_planner
 
@@ -14,19 +14,19 @@ ROBOT = np.zeros(5)
 
 def _empty_with_history() -> PedPrediction:
     return PedPrediction(np.zeros((1, 12, 0, 2)), np.zeros(0), np.zeros(0, int), np.zeros(0, bool),
-                         current=np.zeros((0, 2)), history=np.zeros((8, 0, 2)))
+                         current=np.zeros((0, 2)), history=np.zeros((8, 0, 2)), step_s=STEP_S)
 
 
 def _padding_only() -> PedPrediction:
     """One pedestrian row that is padding (mask False) full of NaN: an empty scene in disguise."""
     nan = np.full((1, 12, 1, 2), np.nan)
     return PedPrediction(nan, np.full(1, np.nan), np.zeros(1, int), np.zeros(1, bool),
-                         history=np.full((8, 1, 2), np.nan))
+                         history=np.full((8, 1, 2), np.nan), step_s=STEP_S)
 
 
 EMPTY_SCENES = {
     "none": lambda: None,
-    "empty_prediction": empty_prediction,
+    "empty_prediction": lambda: empty_prediction(**PRED),
     "empty_with_history": _empty_with_history,
     "padding_only": _padding_only,
 }
@@ -49,7 +49,7 @@ def test_pedestrian_seen_for_one_tick_is_standing_still(name, rows):
     """A pedestrian just appeared: its history is one row, or padded backwards with that row."""
     hist = np.tile(np.array([[[4.0, 0.2]]]), (rows, 1, 1))
     pred = PedPrediction(np.full((1, 12, 1, 2), [4.0, 0.2]), np.full(1, 0.3), np.zeros(1, int),
-                         np.ones(1, bool), current=hist[-1], history=hist)
+                         np.ones(1, bool), current=hist[-1], history=hist, step_s=STEP_S)
     planner = make_planner(name, make_config())
     result = planner.plan(ROBOT, GOAL, pred)
     assert np.all(np.isfinite(result.control))
@@ -57,14 +57,14 @@ def test_pedestrian_seen_for_one_tick_is_standing_still(name, rows):
 
 
 def test_constant_velocity_of_a_one_row_history_is_zero():
-    pred = constant_velocity_prediction(np.array([[[4.0, 0.2]]]), n_steps=5)
+    pred = constant_velocity_prediction(np.array([[[4.0, 0.2]]]), n_steps=5, step_s=STEP_S)
     assert np.allclose(pred.positions, [4.0, 0.2])
 
 
 def test_cv_mpc_without_history_freezes_pedestrians_and_counts_the_fallback():
     pred = PedPrediction(np.full((1, 12, 1, 2), [3.0, 0.0]), np.full(1, 0.3), np.zeros(1, int),
-                         np.ones(1, bool), current=np.array([[3.0, 0.0]]))
-    planner = make_planner("mpc_cv", make_config())
+                         np.ones(1, bool), current=np.array([[3.0, 0.0]]), step_s=STEP_S)
+    planner = make_planner("mpc-cv", make_config())
     result = planner.plan(ROBOT, GOAL, pred)
     assert planner.stats.counts["fallback_no_history"] == 1
     assert result.status == "solved"
@@ -79,10 +79,10 @@ def test_bad_input_still_raises(name):
     nan_hist = np.full((8, 1, 2), np.nan)
     with pytest.raises(ValueError):
         planner.plan(ROBOT, GOAL, PedPrediction(np.zeros((1, 12, 1, 2)), np.full(1, 0.3), np.zeros(1, int),
-                                                np.ones(1, bool), history=nan_hist))
+                                                np.ones(1, bool), history=nan_hist, step_s=STEP_S))
     with pytest.raises(ValueError):
         planner.plan(ROBOT, GOAL, PedPrediction(np.zeros((1, 12, 1, 2)), np.full(1, 0.3), np.zeros(1, int),
-                                                np.ones(1, bool), history=np.zeros((8, 2, 2))))
+                                                np.ones(1, bool), history=np.zeros((8, 2, 2)), step_s=STEP_S))
     with pytest.raises(ValueError):
         planner.plan(np.zeros(3), GOAL, None)
     with pytest.raises(ValueError):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from planner_helpers import PRED, STEP_S
 
 from planner import (
     MPCConfig,
@@ -69,7 +70,7 @@ def test_build_scene_pads_and_picks_nearest():
     cfg = MPCConfig(max_peds=2, max_groups=1, max_walls=2, n_modes=1)
     hist = np.array([[[1.0, 0.0], [5.0, 0.0], [2.0, 0.0], [9.0, 9.0]]] * 2)
     pred = constant_velocity_prediction(hist, group_ids=np.array([0, 1, 1, 2]),
-                                        mask=np.array([True, True, True, False]))
+                                        mask=np.array([True, True, True, False]), **PRED)
     walls = polygon_to_segments(np.array([[0.0, 3.0], [10.0, 3.0], [10.0, 4.0]]), closed=False)
     scene = build_scene(np.zeros(2), pred, walls, cfg)
     assert list(scene.ped_index) == [0, 2] and scene.ped_mask.tolist() == [1.0, 1.0]
@@ -92,7 +93,7 @@ def test_invalid_predictions_raise_clear_errors(bad):
     else:
         positions[1, 5, 2, 0] = np.inf
     with pytest.raises(ValueError, match="invalid PedPrediction"):
-        PedPrediction(positions, radii, gids, mask)
+        PedPrediction(positions, radii, gids, mask, step_s=STEP_S)
 
 
 def test_obstacles_accept_segments_or_polygons():
@@ -108,7 +109,7 @@ def test_obstacles_accept_segments_or_polygons():
 
 def test_group_spread_wider_than_max_span_is_not_a_region():
     cfg = MPCConfig(max_groups=1, n_modes=1, max_group_span_m=3.0)
-    close = frozen_prediction(np.array([[4.0, 0.5], [4.0, -0.5]]), group_ids=np.array([0, 0]))
-    apart = frozen_prediction(np.array([[4.0, 2.5], [4.0, -2.5]]), group_ids=np.array([0, 0]))
+    close = frozen_prediction(np.array([[4.0, 0.5], [4.0, -0.5]]), group_ids=np.array([0, 0]), **PRED)
+    apart = frozen_prediction(np.array([[4.0, 2.5], [4.0, -2.5]]), group_ids=np.array([0, 0]), **PRED)
     assert np.all(build_scene(np.zeros(2), close, None, cfg).grp_clear > 0)
     assert np.all(build_scene(np.zeros(2), apart, None, cfg).grp_clear < -100)

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from planner_helpers import make_config
+from planner_helpers import PRED, STEP_S, make_config
 
 from planner import MPCConfig, MPCPlanner, PedPrediction, constant_velocity_prediction
 from planner.dynamics import clip_control, step_numpy
@@ -24,7 +24,7 @@ def _crossing(start, vel, n_samples: int = 1, spread: float = 0.0, seed: int = 0
     vels = np.asarray(vel, float) + rng.uniform(-spread, spread, (n_samples, 2)) * (np.arange(n_samples) > 0)[:, None]
     pos = np.asarray(start, float) + t[None, :, None] * vels[:, None, :]
     return PedPrediction(pos[:, :, None, :], np.array([0.3]), np.array([0]), np.array([True]),
-                         current=np.asarray(start, float)[None])
+                         current=np.asarray(start, float)[None], step_s=STEP_S)
 
 
 def _min_clearance(state, command, pred: PedPrediction, cfg: MPCConfig) -> float:
@@ -92,7 +92,7 @@ def test_closed_loop_a_blind_plan_with_the_shield_never_touches_crossing_people(
         for k in range(120):
             pos, vel = people(0.1 * k)
             hist = pos[None] + 0.4 * np.arange(-7, 1)[:, None, None] * vel[None]
-            pred = constant_velocity_prediction(hist, np.full(6, 0.3), np.arange(6), np.ones(6, bool))
+            pred = constant_velocity_prediction(hist, np.full(6, 0.3), np.arange(6), np.ones(6, bool), **PRED)
             control = shield_control(state, STRAIGHT, pred, None, SHIELD).control if shielded else STRAIGHT[0]
             state = step_numpy(state, clip_control(state, control, 0.1, robot), 0.1, robot.model)
             pos, _ = people(0.1 * (k + 1))
@@ -129,7 +129,8 @@ def test_the_reach_filter_never_changes_the_verdict(monkeypatch):
         t = 0.4 * np.arange(1, 13)[None, :, None, None]
         pos = now + t * (vel + rng.normal(0, 0.3, (20, 1, n, 2)))
         hist = now + 0.4 * np.arange(-7, 1)[:, None, None] * vel
-        pred = PedPrediction(pos, np.full(n, 0.3), np.arange(n), np.ones(n, bool), current=now, history=hist)
+        pred = PedPrediction(pos, np.full(n, 0.3), np.arange(n), np.ones(n, bool), current=now, history=hist,
+                             step_s=STEP_S)
         state = np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi), rng.uniform(0, 1.2), 0.0])
         filtered = shield_control(state, STRAIGHT, pred, None, SHIELD)
         with monkeypatch.context() as m:
