@@ -159,7 +159,7 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
 
 def _evaluate(args: argparse.Namespace) -> int:
     from envs.atomic import check_writable_dir, check_writable_file, write_json_atomic, write_text_atomic
-    from envs.evaluation.evaluate import check_setup, evaluate
+    from envs.evaluation.evaluate import Interrupted, check_setup, evaluate
     from envs.evaluation.report import compare, compare_json, compare_png, markdown_table
 
     if args.episodes < 1 or args.seed < 0 or args.record < 0:
@@ -177,8 +177,15 @@ def _evaluate(args: argparse.Namespace) -> int:
         check_setup(pcfg, config)
     results = []
     for pcfg in configs:
-        result = evaluate(pcfg, config, args.episodes, args.seed, args.workers, args.record, args.out,
-                          progress=not args.no_progress, backend=args.backend, address=args.address, check=False)
+        try:
+            result = evaluate(pcfg, config, args.episodes, args.seed, args.workers, args.record, args.out,
+                              progress=not args.no_progress, backend=args.backend, address=args.address, check=False)
+        except KeyboardInterrupt as exc:
+            kept = (f"results of {', '.join(r['policy'] for r in results)} written to {args.out}" if results
+                    else "no results written")
+            done = f"{exc}; " if isinstance(exc, Interrupted) else ""
+            raise Interrupted(f"interrupted: {done}{kept}; evaluate does not resume: rerun the command to start "
+                              "again") from None
         results.append(result)
         print(markdown_table(result), end="\n\n", flush=True)
     if len(results) > 1:
@@ -193,8 +200,10 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _benchmark(args: argparse.Namespace) -> int:
-    from envs.evaluation.benchmark import run_benchmark
+    from envs.evaluation.benchmark import RECORDS, run_benchmark
+    from envs.evaluation.evaluate import Interrupted
     from envs.evaluation.leaderboard import leaderboard_markdown
+    from envs.evaluation.records import read_records
     from envs.evaluation.suite import load_suite
 
     check_backend(args)
@@ -202,9 +211,16 @@ def _benchmark(args: argparse.Namespace) -> int:
     cells = suite.select(args.cells.split(",") if args.cells else None)
     args.policy = args.policy or ["mpc-gpgraph", "mpc-cv", "mpc-none", "social-force"]
     configs = policy_configs(args)
-    board = run_benchmark(suite, cells, configs, args.out, data=args.data, workers=args.workers,
-                          backend=args.backend, address=args.address, merge=args.merge,
-                          progress=not args.no_progress)
+    try:
+        board = run_benchmark(suite, cells, configs, args.out, data=args.data, workers=args.workers,
+                              backend=args.backend, address=args.address, merge=args.merge,
+                              progress=not args.no_progress)
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, Interrupted):
+            raise Interrupted(f"interrupted: {exc}") from None
+        path = args.out / RECORDS  # interrupted before or after the episodes: what the records file holds
+        raise Interrupted(f"interrupted: {len(read_records(path))} episodes saved in {path}; rerun the same "
+                          "command to resume") from None
     print(leaderboard_markdown(board))
     run = board["run"]
     print(f"\n{run['episodes_run']} episodes run, {run['episodes_resumed']} already recorded, "
@@ -270,6 +286,9 @@ def main(argv: list[str] | None = None) -> int:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"crowdnav: error: {message}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:  # Ctrl-C: one line saying what was kept (evaluate/benchmark), exit 130
+        print(f"crowdnav: {str(exc) or 'interrupted'}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from envs.atomic import check_writable_dir
 from envs.evaluation.episode import EpisodeTask, fingerprint
-from envs.evaluation.evaluate import check_setup
+from envs.evaluation.evaluate import CtrlC, Interrupted, check_setup
 from envs.evaluation.pool import run_tasks
 from envs.evaluation.records import EpisodeRecord, RecordStore, merge_records, read_records
 from envs.evaluation.suite import DEFAULT_DATA, Cell, Suite
@@ -76,7 +77,9 @@ def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Policy
                   data: Path = DEFAULT_DATA, workers: int = 1, backend: str = "local", address: str | None = None,
                   merge: Sequence[Path] = (), progress: bool = True) -> dict[str, Any]:
     """Run what is missing, then write the leaderboard from every record of the selection. Returns the
-    leaderboard JSON (see `envs.evaluation.leaderboard.leaderboard`) with `run` (episodes run / resumed, wall time)."""
+    leaderboard JSON (see `envs.evaluation.leaderboard.leaderboard`) with `run` (episodes run / resumed, wall time).
+    Ctrl-C while episodes run raises `envs.evaluation.evaluate.Interrupted` saying how many are saved (every
+    finished one is: a rerun resumes from there)."""
     from tqdm.auto import tqdm
 
     from envs.evaluation.leaderboard import leaderboard, write_leaderboard
@@ -90,13 +93,21 @@ def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Policy
         check_setup(pcfg, task.env)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    with tqdm(total=len(plan.tasks), initial=len(plan.done), desc=suite.name, unit="ep",
-              disable=not progress) as bar:
-        for _, res in run_tasks(plan.todo, workers, backend, address):
-            store.append(res["record"])
-            bar.update(1)
-    wall = time.perf_counter() - start
     wanted = {(t.cell, t.policy.name, t.seed) for t in plan.tasks}
+    try:
+        with CtrlC() as ctrl_c, \
+                tqdm(total=len(plan.tasks), initial=len(plan.done), desc=suite.name, unit="ep",
+                     disable=not progress) as bar, \
+                closing(run_tasks(plan.todo, workers, backend, address)) as results:
+            for _, res in results:
+                store.append(res["record"])
+                bar.update(1)
+                ctrl_c.check()
+    except KeyboardInterrupt:
+        saved = len(wanted & {r.key for r in merge_records([recorded, store.read()])})  # wherever it landed
+        raise Interrupted(f"{saved} of {len(plan.tasks)} episodes saved in {store.path}; "
+                          "rerun the same command to resume") from None
+    wall = time.perf_counter() - start
     records = [r for r in merge_records([recorded, store.read()]) if r.key in wanted]
     board = leaderboard(suite, list(cells), list(policies), records)
     board["run"] = {"episodes_run": len(plan.todo), "episodes_resumed": len(plan.done), "workers": workers,
