@@ -51,7 +51,7 @@ soak: setup
 # out/bench-v5 (2026-11-25: the 12-pedestrian MPC, the pairwise-assigner default predictor, arrivals back-filled in
 # the history). Not run in CI.
 benchmark: setup
-	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v5 --data ../shared/datasets/eth_ucy \
+	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v5 \
 		--policy mpc-gpgraph mpc-cv mpc-none social-force ppo-crowdnav
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors

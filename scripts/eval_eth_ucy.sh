@@ -5,8 +5,8 @@
 # `python -m predictor.report OUT_DIR`. Seed 0, 10 trials, one thread per evaluation. See RESULTS.md.
 set -euo pipefail
 out=$1; shift
-data=${DATA:-../shared/datasets/eth_ucy}
 py=${PY:-.venv/bin/python}
+data=${DATA:-$("$py" -c "from predictor.ethucy import DEFAULT_DATA_DIR; print(DEFAULT_DATA_DIR)")}  # ETH_UCY_DIR
 mkdir -p "$out"
 for model in "$@"; do
   for scene in eth hotel univ zara1 zara2; do

@@ -22,8 +22,8 @@
 set -euo pipefail
 stage=$1; shift
 out=${OUT:-out/synthetic_pretraining}
-data=${DATA:-../shared/datasets/eth_ucy}
 py=${PY:-.venv/bin/python}
+data=${DATA:-$("$py" -c "from predictor.ethucy import DEFAULT_DATA_DIR; print(DEFAULT_DATA_DIR)")}  # ETH_UCY_DIR
 INIT=${INIT:-gpgraph-stgcnn-synthetic-conv}
 export INIT
 epochs=${EPOCHS:-40}

@@ -31,7 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = Path("/work/shared/datasets/eth_ucy/eth")
+from predictor.ethucy import DEFAULT_DATA_DIR
+
+DATA = DEFAULT_DATA_DIR / "eth"  # ETH/UCY (predictor.ethucy; ETH_UCY_DIR overrides it)
 DEFAULT_RECORDINGS = (DATA / "train/crowds_zara03_train.txt", DATA / "train/uni_examples_train.txt")
 POLICIES = ("mpc-gpgraph", "mpc-cv")
 TUNING_SUITE = "crowdnav-tune"  # its defaults (the same as crowdnav-v1's) set the episodes' rules
@@ -156,7 +158,7 @@ def run_one(task: tuple) -> dict:
     result = run_episode(cfg, pol.name, seed, env=env, policy=pol)
     m = result.metrics
     rec = {"recording": Path(recording).stem, "policy": policy, "variant": variant, "seed": seed,
-           "outcome": m["outcome"], "collision_with": m["collision_with"], "kind": m["collision_kind"],
+           "outcome": m["outcome"], "collision_with": m["collision_with"], "kind": m["at_fault"],
            "steps": m["steps"],
            "min_distance_m": m["min_distance_m"], "fallbacks": m["fallbacks"], "times_ms": result.solve_times_ms}
     if m["outcome"] == "collision":

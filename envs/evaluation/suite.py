@@ -20,8 +20,9 @@ from typing import Any
 
 from crowdsim import GroupConfig
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from predictor.ethucy import DEFAULT_DATA_DIR
 
-DEFAULT_DATA = Path("../shared/datasets/eth_ucy")
+DEFAULT_DATA = DEFAULT_DATA_DIR  # predictor.ethucy owns the ETH/UCY data path (ETH_UCY_DIR overrides it)
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
               "episodes", "seed0", "note", "scene", "predictor"}
 SIMULATED_SCENE = "synthetic"

@@ -7,8 +7,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from predictor.ethucy import DEFAULT_DATA_DIR
+
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared"
-ETH_UCY = SHARED / "datasets" / "eth_ucy"
+ETH_UCY = DEFAULT_DATA_DIR
 REFERENCE = SHARED / "reference" / "gpgraph_sgcn"
 SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
 
@@ -18,7 +20,7 @@ torch.set_num_threads(1)
 @pytest.fixture
 def eth_ucy() -> Path:
     if not ETH_UCY.is_dir():
-        pytest.skip(f"ETH/UCY data not found at {ETH_UCY} (needs the sibling ../shared folder)")
+        pytest.skip(f"ETH/UCY data not found at {ETH_UCY} (needs the sibling ../shared folder, or ETH_UCY_DIR)")
     return ETH_UCY
 
 

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from predictor.ethucy import DataFormatError, read_groups, read_labels, read_trajectories
+from predictor.ethucy import DEFAULT_DATA_DIR, DataFormatError, read_groups, read_labels, read_trajectories
 
 ROWS = np.array([[10.0 * (i // 3), i % 3 + 1, 0.5 * i, -0.25 * i] for i in range(30)])
 
@@ -32,9 +35,9 @@ def test_every_package_reads_with_this_reader():
 
 
 def test_a_real_benchmark_file_reads(tmp_path):
-    path = Path("../shared/datasets/eth_ucy/hotel/test/biwi_hotel.txt")
+    path = DEFAULT_DATA_DIR / "hotel" / "test" / "biwi_hotel.txt"
     if not path.is_file():
-        pytest.skip("../shared/datasets/eth_ucy is not here")
+        pytest.skip(f"{DEFAULT_DATA_DIR} is not here")
     rows = read_trajectories(path)
     assert rows.shape[1] == 4 and len(rows) > 1000 and np.all(rows[:, :2] == np.round(rows[:, :2]))
 
@@ -125,3 +128,15 @@ def test_fuzz_truncated_files_never_crash_and_keep_every_complete_row(tmp_path):
         # A cut inside the last number may still parse (the text as given); every earlier row is intact.
         np.testing.assert_array_equal(rows[:complete], np.round(ROWS, 2)[:complete])
         assert len(rows) in (complete, complete + 1)
+
+
+def test_data_dir_has_one_owner_and_an_environment_override(tmp_path):
+    from envs.evaluation.suite import DEFAULT_DATA
+
+    assert DEFAULT_DATA is DEFAULT_DATA_DIR
+    env = {k: v for k, v in os.environ.items() if k != "ETH_UCY_DIR"}
+    code = "from envs.evaluation.suite import DEFAULT_DATA; print(DEFAULT_DATA)"
+    for override, expected in ((None, "../shared/datasets/eth_ucy"), (str(tmp_path / "x"), str(tmp_path / "x"))):
+        run_env = env if override is None else {**env, "ETH_UCY_DIR": override}
+        out = subprocess.run([sys.executable, "-c", code], env=run_env, capture_output=True, text=True, check=True)
+        assert out.stdout.strip() == expected

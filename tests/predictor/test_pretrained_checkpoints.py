@@ -9,18 +9,17 @@ five-scene mean best-of-20 FDE: paper 0.446 vs 0.478 m, iid 0.715 vs 0.764 m (pe
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
 
 from predictor.checkpoint import load_model
+from predictor.ethucy import DEFAULT_DATA_DIR
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.windows import load_windows
 
 SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
-DATA = Path("../shared/datasets/eth_ucy")
+DATA = DEFAULT_DATA_DIR
 TEST_FILE = {"eth": "biwi_eth", "hotel": "biwi_hotel", "univ": "students", "zara1": "crowds_zara01",
              "zara2": "crowds_zara02"}
 
@@ -38,7 +37,7 @@ def test_pretrained_checkpoint_records_how_it_was_made_and_never_saw_its_scene(s
 @pytest.mark.parametrize("protocol, margin_m", [("paper", 0.02), ("iid", 0.02)])
 def test_pretrained_beats_real_only_on_the_five_test_scenes(protocol, margin_m):
     if not DATA.is_dir():
-        pytest.skip("../shared/datasets/eth_ucy is not here")
+        pytest.skip(f"{DATA} is not here")
     torch.set_num_threads(1)
     fde = {"pretrained": [], "real-only": []}
     for scene in SCENES:
