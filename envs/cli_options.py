@@ -16,7 +16,7 @@ from typing import Any
 
 from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
-from envs.policies.plugins import SB3_PREFIX, is_plugin
+from envs.policies.plugins import SB3_PREFIX
 
 # flag -> the `PolicyConfig` field it sets
 FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-every": "replan_every_steps",
@@ -37,17 +37,17 @@ OBSERVATION_POLICIES = ("ppo-crowdnav",)  # registry policies acting on the obse
 
 
 def flags_read(name: str) -> tuple[str, ...]:
-    """The policy flags the policy `name` reads (a plug-in: all of them)."""
-    if is_plugin(name):
-        return tuple(FLAG_FIELDS)
-    if name.startswith(SB3_PREFIX):
-        return SB3_FLAGS
-    return POLICY_FLAGS.get(name, ())
+    """The policy flags the policy `name` reads: a registry policy's `POLICY_FLAGS`, an SB3 agent's `SB3_FLAGS`,
+    and every flag for any other name (a `module:factory` plug-in; `PolicyConfig` rejects what is neither)."""
+    if name in POLICY_FLAGS:
+        return POLICY_FLAGS[name]
+    return SB3_FLAGS if name.startswith(SB3_PREFIX) else tuple(FLAG_FIELDS)
 
 
 def reads_observation(name: str) -> bool:
-    """Whether the policy acts on the env's observation (so that --wall-rays can matter to it)."""
-    return is_plugin(name) or name.startswith(SB3_PREFIX) or name in OBSERVATION_POLICIES
+    """Whether the policy acts on the env's observation (so that --wall-rays can matter to it): an SB3 agent, a
+    plug-in or one of `OBSERVATION_POLICIES`."""
+    return name not in POLICY_FLAGS or name in OBSERVATION_POLICIES
 
 
 class DefaultInt(int):
