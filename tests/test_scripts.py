@@ -83,3 +83,18 @@ def test_python_tools_start(command):
     out = subprocess.run([sys.executable, *command, "--help"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert "usage:" in out.stdout
+
+
+@pytest.mark.slow
+def test_tune_real_crowds_runs_an_episode(load_script):
+    """The tuning script reads the env's current metric names (it once read a renamed field and failed)."""
+    tune = load_script("tune_real_crowds")
+    recording = tune.DEFAULT_RECORDINGS[0]
+    if not recording.is_file():
+        pytest.skip(f"{recording} is not here")
+    rec = tune.run_one((str(recording), "mpc-cv", "base", {}, "env", 1000))
+    assert rec["outcome"] in ("success", "collision", "timeout") and rec["steps"] > 0
+    assert rec["kind"] in ("", "robot", "pedestrian", "spawn")
+    assert (rec["kind"] != "") == (rec["outcome"] == "collision")
+    row = tune.summarise([rec])[0]
+    assert (row["recording"], row["n"], row[rec["outcome"]]) == (recording.stem, 1, 1.0)
