@@ -32,6 +32,7 @@ from envs.history import PedHistory
 from envs.kernels import intruded_groups, step_distances
 from envs.metrics import EpisodeMetrics
 from envs.observation import build_observation, observation_space
+from envs.prediction import load_predictor_spec, predict
 from envs.rewards import StepFacts, reward_terms, weighted
 from envs.timing import DEFAULT_TIMING
 from envs.view import Decision, Pedestrians, PolicyView
@@ -297,18 +298,11 @@ class CrowdNavEnv(gym.Env):
     def _update_prediction(self) -> None:
         if not self.config.observation.needs_predictor:
             return
-        if self._predictor is None:
-            from predictor import load_predictor  # lazy: torch only when predictions are observed
-
-            self._predictor = load_predictor(self.config.observation.predictor)
-        hist = self.history_window()
-        if hist.shape[1] == 0:
-            self._pred_samples = np.zeros((1, self.timing.pred_len, 0, 2))
-            self._pred_groups = np.zeros(0, np.int64)
-            return
+        if self._predictor is None:  # torch is loaded only when predictions are observed
+            self._predictor = load_predictor_spec(self.config.observation.predictor, threads=None, timing=self.timing)
         k = self.config.observation.n_prediction_samples
-        pred = self._predictor.predict(hist, n_samples=k, rng=self._pred_rng)
-        self._pred_samples, self._pred_groups = pred.samples, pred.group_id
+        self._pred_samples, self._pred_groups = predict(self._predictor, self.history_window(), k, self._pred_rng,
+                                                        self.timing.pred_len)
 
     def _observe(self) -> dict[str, np.ndarray]:
         cfg, p = self.config, self._peds()

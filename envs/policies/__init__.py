@@ -25,7 +25,6 @@ from envs.policies.registry import (
     PolicyConfig,
     RandomPolicy,
     act,
-    load_predictor_spec,
     make_policy,
     singleton_prediction,
 )
@@ -33,5 +32,5 @@ from envs.policies.registry import (
 __all__ = [
     "AGENTS_DIR", "DEFAULT_PREDICTOR", "ENV_MPC", "POLICIES", "PREDICTOR_POLICIES", "REPLAN_EVERY_STEPS",
     "SCENE_TEMPLATE", "GPGraphPolicy", "LegacyPolicy", "PlannerPolicy", "Policy", "PolicyConfig", "RandomPolicy",
-    "act", "load_predictor_spec", "make_policy", "singleton_prediction",
+    "act", "make_policy", "singleton_prediction",
 ]

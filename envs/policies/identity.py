@@ -12,8 +12,9 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
+from envs.factories import is_plugin
 from envs.policies import AGENTS_DIR, DEFAULT_PREDICTOR, POLICIES, PREDICTOR_POLICIES, PolicyConfig
-from envs.policies.plugins import SB3_PREFIX, is_plugin, parse_sb3
+from envs.policies.plugins import SB3_PREFIX, parse_sb3
 from predictor.checkpoints import checkpoint_file  # torch-free
 
 

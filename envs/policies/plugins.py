@@ -19,8 +19,6 @@ with `weights_only=True`, and an agent trained on another observation layout is 
 
 from __future__ import annotations
 
-import importlib
-import re
 from pathlib import Path
 from typing import Any
 
@@ -29,28 +27,7 @@ import numpy as np
 from envs.policies.sb3_files import SB3_ALGOS, load_agent
 from envs.view import Decision, PolicyView
 
-PLUGIN_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 SB3_PREFIX = "sb3:"
-
-
-def is_plugin(spec: str) -> bool:
-    """Whether `spec` names a `module:factory` plug-in."""
-    return bool(PLUGIN_RE.match(spec))
-
-
-def load_factory(spec: str) -> Any:
-    """The callable `factory` of `module:factory`; ValueError when the module or the name is missing."""
-    if not is_plugin(spec):
-        raise ValueError(f"plug-in {spec!r} must look like module:factory")
-    module_name, attr = spec.split(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise ValueError(f"plug-in {spec!r}: cannot import module {module_name!r} ({exc})") from exc
-    factory = getattr(module, attr, None)
-    if not callable(factory):
-        raise ValueError(f"plug-in {spec!r}: module {module_name!r} has no callable {attr!r}")
-    return factory
 
 
 def parse_sb3(spec: str) -> tuple[str, Path]:

@@ -32,7 +32,9 @@ import numpy as np
 
 from envs.config import DEFAULT_PREDICTOR
 from envs.env import CrowdNavEnv
-from envs.policies.plugins import SB3_PREFIX, SB3Policy, is_plugin, load_factory
+from envs.factories import is_plugin, load_factory
+from envs.policies.plugins import SB3_PREFIX, SB3Policy
+from envs.prediction import load_predictor_spec, predict
 from envs.timing import PredictionTiming
 from envs.view import Decision, PolicyView
 from planner import (
@@ -168,26 +170,14 @@ class PlannerPolicy:
                         predicted_group_id=prediction.group_ids if prediction.n_peds else None)
 
 
-def load_predictor_spec(spec: str | None, threads: int = 1) -> Any:
-    """A predictor from a name or checkpoint (`predictor.load_predictor`) or a `module:factory` plug-in."""
-    if spec is not None and is_plugin(spec):
-        return load_factory(spec)()
-    from predictor import load_predictor, set_threads  # lazy: torch only for predictor policies
-
-    set_threads(threads)
-    return load_predictor(spec or DEFAULT_PREDICTOR)
-
-
 class GPGraphPolicy(PlannerPolicy):
     """MPC + a predictor's samples and group assignment (GP-Graph by default)."""
 
     def __init__(self, config: MPCConfig, predictor: str | None = DEFAULT_PREDICTOR, n_samples: int = 20,
                  threads: int = 1, replan_every_steps: int = REPLAN_EVERY_STEPS,
                  env_timing: PredictionTiming | None = None) -> None:
-        self.predictor = load_predictor_spec(predictor, threads)
+        self.predictor = load_predictor_spec(predictor, threads, env_timing)
         self.timing = PredictionTiming.of(self.predictor)
-        if env_timing is not None:  # the env's history and the predictor's must be the same grid
-            env_timing.check_matches(self.timing, "the predictor")
         self.n_samples = n_samples
         self.rng = np.random.default_rng(0)
         super().__init__("mpc-gpgraph", MPCPlanner(config), self._gpgraph, replan_every_steps)
@@ -197,12 +187,12 @@ class GPGraphPolicy(PlannerPolicy):
         self.rng = np.random.default_rng(seed)
 
     def _gpgraph(self, view: PolicyView) -> PedPrediction:
-        p = view.pedestrians
+        p, t = view.pedestrians, view.timing
         if len(p.pos) == 0:
-            return empty_prediction(view.timing.pred_len, view.timing.step_s)
-        pred = self.predictor.predict(view.history, n_samples=self.n_samples, rng=self.rng)
-        return PedPrediction(pred.samples, p.radius, pred.group_id, np.ones(len(p.pos), bool),
-                             current=p.pos, history=view.history, step_s=view.timing.step_s)
+            return empty_prediction(t.pred_len, t.step_s)
+        samples, group_id = predict(self.predictor, view.history, self.n_samples, self.rng, t.pred_len)
+        return PedPrediction(samples, p.radius, group_id, np.ones(len(p.pos), bool), current=p.pos,
+                             history=view.history, step_s=t.step_s)
 
 
 def singleton_prediction(view: PolicyView) -> PedPrediction:

@@ -210,3 +210,18 @@ def test_a_view_plugin_runs_as_is_and_an_old_protocol_one_through_the_legacy_ada
     assert isinstance(old, LegacyPolicy) and old.name == "flaky"
     old.reset(0)
     np.testing.assert_array_equal(act(old, env), np.zeros(2, np.float32))
+
+
+def test_a_plugin_beside_the_command_loads_without_pythonpath_and_never_shadows_a_package(tmp_path, monkeypatch):
+    from envs.factories import load_factory
+
+    (tmp_path / "cwd_plugin.py").write_text(VIEW_POLICY)
+    (tmp_path / "json.py").write_text("def dumps(obj):\n    return 'shadowed'\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
+    monkeypatch.delitem(sys.modules, "cwd_plugin", raising=False)
+    policy = load_factory("cwd_plugin:make")(None, None)  # the console script's sys.path lacks the current folder
+    assert type(policy).__name__ == "Ahead" and sys.path[-1] == str(tmp_path)
+    assert load_factory("json:dumps")([1]) == "[1]"  # the standard library's json, not the local file
+    with pytest.raises(ValueError, match="cannot import module 'nowhere_plugin'"):
+        load_factory("nowhere_plugin:make")

@@ -1,0 +1,43 @@
+"""The one prediction path of the env and its policies: load a predictor by name, call it on a history window.
+
+Both the env (predictions in the observation, `ObservationConfig.predictions`) and the MPC policy (`mpc-gpgraph`)
+load their predictor with `load_predictor_spec` and draw samples with `predict`, each with its own Generator; each
+checks the predictor's timing against the env's (`envs.timing`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from envs.config import DEFAULT_PREDICTOR
+from envs.factories import is_plugin, load_factory
+from envs.timing import PredictionTiming
+
+
+def load_predictor_spec(spec: str | None, threads: int | None = 1, timing: PredictionTiming | None = None) -> Any:
+    """A predictor from a name or checkpoint (`predictor.load_predictor`; None: `DEFAULT_PREDICTOR`) or a
+    `module:factory` plug-in. threads: torch threads to set first (None: leave them). timing: the env's; a predictor
+    declaring another raises ValueError."""
+    if spec is not None and is_plugin(spec):
+        predictor = load_factory(spec)()
+    else:
+        from predictor import load_predictor, set_threads  # lazy: torch only where a predictor is used
+
+        if threads is not None:
+            set_threads(threads)
+        predictor = load_predictor(spec or DEFAULT_PREDICTOR)
+    if timing is not None:  # the env's history and the predictor's must be the same grid
+        timing.check_matches(PredictionTiming.of(predictor), "the predictor")
+    return predictor
+
+
+def predict(predictor: Any, history: np.ndarray, n_samples: int, rng: np.random.Generator,
+            pred_len: int) -> tuple[np.ndarray, np.ndarray]:
+    """Samples (K, pred_len, N, 2) m and group ids (N,) for a history (obs_len, N, 2) m; with nobody in view,
+    (1, pred_len, 0, 2) and (0,) without calling the predictor (and without drawing from `rng`)."""
+    if history.shape[1] == 0:
+        return np.zeros((1, pred_len, 0, 2)), np.zeros(0, np.int64)
+    pred = predictor.predict(history, n_samples=n_samples, rng=rng)
+    return pred.samples, pred.group_id
