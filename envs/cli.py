@@ -125,12 +125,8 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
             raise UsageError("--scenario replay needs --replay-file PATH")
         if args.pedestrians is not None or args.invisible:
             raise UsageError("--pedestrians and --invisible do not apply to --scenario replay (recorded people)")
-        from envs.replay import ReplayConfig, known_frame_step
+        from envs.replay import ReplayConfig
 
-        known = known_frame_step(args.replay_file)
-        if args.frame_step is not None and known is not None and abs(args.frame_step - known) > 0.01 * known:
-            print(f"crowdnav: warning: {args.replay_file.name} is annotated every {known} s; replaying it at "
-                  f"--frame-step {args.frame_step} s instead", file=sys.stderr)
         kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file, frame_step_s=args.frame_step)
     elif args.replay_file is not None or args.groups_file is not None or args.frame_step is not None:
         raise UsageError("--replay-file/--groups-file/--frame-step need --scenario replay")
@@ -157,6 +153,19 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
     return config
 
 
+def _frame_step_warning(args: argparse.Namespace) -> str | None:
+    """A warning when --frame-step contradicts a known recording's annotation step (`envs.replay`)."""
+    if args.frame_step is None:
+        return None
+    from envs.replay import known_frame_step
+
+    known = known_frame_step(args.replay_file)
+    if known is None or abs(args.frame_step - known) <= 0.01 * known:
+        return None
+    return (f"crowdnav: warning: {args.replay_file.name} is annotated every {known} s; replaying it at "
+            f"--frame-step {args.frame_step} s instead")
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from envs.atomic import check_writable_dir, check_writable_file, write_json_atomic, write_text_atomic
     from envs.evaluation.evaluate import Interrupted, check_setup, evaluate
@@ -175,6 +184,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         check_writable_file(args.json)
     for pcfg in configs:  # every policy and plug-in builds before any episode runs
         check_setup(pcfg, config)
+    if (warning := _frame_step_warning(args)) is not None:  # after every check: a misuse stays one line
+        print(warning, file=sys.stderr)
     results = []
     for pcfg in configs:
         try:
