@@ -7,7 +7,8 @@
     crowdnav policies | scenarios | suites
 
 Misuse (an unknown name, a bad value, an unwritable output path, a flag the chosen policy ignores) prints one
-line on stderr and exits 2 before any episode runs.
+line on stderr and exits 2 before any episode runs. Ctrl-C prints one line saying what was kept and exits 130
+(benchmark: every finished episode; the same command resumes).
 """
 
 from __future__ import annotations
