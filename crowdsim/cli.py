@@ -12,7 +12,15 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from crowdsim.config import GroupConfig, SimConfig
-from crowdsim.generate import BACKENDS, SPLITS, DatasetIncomplete, RunSpec, generate, make_dataset
+from crowdsim.generate import (
+    BACKENDS,
+    SPLITS,
+    DatasetIncomplete,
+    DatasetInterrupted,
+    RunSpec,
+    generate,
+    make_dataset,
+)
 from crowdsim.presets import PRESETS, get_preset, sample_config
 from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS
 
@@ -196,6 +204,13 @@ def main(argv: list[str] | None = None) -> int:
         return _run(args)
     except ValueError as exc:  # bad flags or values: one line, exit 2, nothing written (checked before work)
         return _error(str(exc))
+    except DatasetInterrupted as exc:  # Ctrl-C in dataset: what is on disk is complete
+        print(f"crowdsim: interrupted: {exc.written} of {exc.total} recordings written to {args.out} (each complete, "
+              "the others absent); rerun the command to make them all", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:  # Ctrl-C elsewhere: one line, no traceback (a recording is written only at its end)
+        print(f"crowdsim: interrupted: {args.command} stopped", file=sys.stderr)
+        return 130
 
 
 def _run(args: argparse.Namespace) -> int:

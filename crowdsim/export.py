@@ -57,10 +57,15 @@ class TrajectoryLog:
 
 
 def _atomic_write(path: Path, text: str) -> None:
+    """Write to `<path>.tmp`, then rename it over `path` (the temporary file is removed if interrupted)."""
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 # Text is built with numpy, all rows at once: each field of each row becomes a fixed-width run of ASCII
@@ -230,13 +235,20 @@ def table_files(name: str, table: np.ndarray, metadata: dict[str, Any]) -> Recor
 
 
 def write_files(folder: Path, files: RecordingFiles) -> dict[str, Path]:
-    """Write each (file name, text) of `files` atomically into folder (created if needed); kind -> path."""
+    """Write each (file name, text) of `files` atomically into folder (created if needed); kind -> path. If
+    interrupted (Ctrl-C, an error), the files of this call already written are removed again: a recording is on
+    disk whole or not at all."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    paths = {}
-    for kind, (file_name, text) in files.items():
-        paths[kind] = folder / file_name
-        _atomic_write(paths[kind], text)
+    paths: dict[str, Path] = {}
+    try:
+        for kind, (file_name, text) in files.items():
+            _atomic_write(folder / file_name, text)
+            paths[kind] = folder / file_name
+    except BaseException:
+        for path in paths.values():
+            path.unlink(missing_ok=True)
+        raise
     return paths
 
 

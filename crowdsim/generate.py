@@ -90,11 +90,17 @@ def default_name(config: SimConfig, spec: RunSpec) -> str:
 
 def generate(config: SimConfig, spec: RunSpec, out_dir: Path, name: str | None = None,
              rrd: bool = False, progress: bool = False) -> dict[str, Path]:
-    """Simulate and write one recording (and optionally `<name>.rrd`) into out_dir."""
+    """Simulate and write one recording (and optionally `<name>.rrd`, written as the simulation runs and removed if
+    it does not finish) into out_dir."""
     name = name or default_name(config, spec)
     out_dir = Path(out_dir)
     rrd_path = out_dir / f"{name}.rrd" if rrd else None
-    log, sim = simulate(config, spec, rrd_path, progress)
+    try:
+        log, sim = simulate(config, spec, rrd_path, progress)
+    except BaseException:  # Ctrl-C or an error mid-simulation: no partial rerun recording is left behind
+        if rrd_path is not None:
+            rrd_path.unlink(missing_ok=True)
+        raise
     paths = write_recording(out_dir, name, log, metadata(config, spec, sim))
     if rrd_path is not None:
         paths["rrd"] = rrd_path
@@ -167,6 +173,16 @@ class DatasetIncomplete(RuntimeError):
         self.paths = paths
 
 
+class DatasetInterrupted(KeyboardInterrupt):
+    """Ctrl-C during `make_dataset`: `written` of the `total` recordings are on disk, each complete (written
+    atomically as it arrived); the others are absent, none partial."""
+
+    def __init__(self, written: int, total: int) -> None:
+        super().__init__(f"{written} of {total} recordings written")
+        self.written = written
+        self.total = total
+
+
 def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
                  spec: RunSpec, progress: bool = True, backend: str = "local", workers: int | None = None,
                  address: str | None = None, preset: str | None = None) -> dict[str, list[Path]]:
@@ -188,6 +204,7 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
 
     Returns the trajectory file paths of each split, in job order (scenario-major, then seed). A recording whose
     worker process died twice (local pool) is not written; the others are, then DatasetIncomplete names it.
+    Ctrl-C raises DatasetInterrupted (a KeyboardInterrupt) saying how many recordings were written.
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
@@ -206,13 +223,16 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
         results = run_local(jobs, workers or 1)
     paths: dict[int, Path] = {}
     failures: dict[str, str] = {}
-    with closing(results), tqdm(total=len(jobs), desc="dataset", unit="recording", disable=not progress) as bar:
-        for i, files in results:
-            if isinstance(files, WorkerDied):
-                failures[f"{jobs[i].split}/{jobs[i].name}"] = str(files)
-            else:
-                paths[i] = write_files(Path(out_dir) / jobs[i].split, files)["trajectories"]
-            bar.update(1)
+    try:
+        with closing(results), tqdm(total=len(jobs), desc="dataset", unit="recording", disable=not progress) as bar:
+            for i, files in results:
+                if isinstance(files, WorkerDied):
+                    failures[f"{jobs[i].split}/{jobs[i].name}"] = str(files)
+                else:
+                    paths[i] = write_files(Path(out_dir) / jobs[i].split, files)["trajectories"]
+                bar.update(1)
+    except KeyboardInterrupt:
+        raise DatasetInterrupted(len(paths), len(jobs)) from None
     out: dict[str, list[Path]] = {s: [] for s in SPLITS}
     for i, job in enumerate(jobs):
         if i in paths:
