@@ -66,20 +66,28 @@ def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iter
 
 
 def run_on_ray(fn: Callable[[J], R], jobs: Sequence[J], address: str | None = None,
-               num_cpus: int | None = None) -> Iterator[tuple[int, R]]:
+               num_cpus: int | None = None) -> Iterator[tuple[int, R | WorkerDied]]:
     """Run `fn(job)` for every job as a Ray task of one CPU, yielding (index in jobs, result) in order of
     completion. `fn` must be importable by name on the workers (a module-level function of an installed
-    package); address and num_cpus as in `ray_session`. Tasks still pending when the caller stops (an
-    error, or the generator closed) are cancelled."""
+    package); address and num_cpus as in `ray_session`. As in `run_in_processes`, a task whose worker dies is
+    run once more (Ray's own retry), and after a second death yields `WorkerDied` naming the cause. Tasks still
+    pending when the caller stops (an error, or the generator closed) are cancelled."""
     with ray_session(address, num_cpus) as ray:
-        task = ray.remote(num_cpus=1)(fn)
+        from ray.exceptions import OutOfMemoryError, WorkerCrashedError
+
+        task = ray.remote(num_cpus=1, max_retries=1)(fn)
         index: dict[Any, int] = {task.remote(job): i for i, job in enumerate(jobs)}
         pending = list(index)
         try:
             while pending:
                 done, pending = ray.wait(pending, num_returns=1)
                 for ref in done:
-                    yield index[ref], ray.get(ref)
+                    try:
+                        result: R | WorkerDied = ray.get(ref)
+                    except (WorkerCrashedError, OutOfMemoryError) as exc:
+                        what = "killed by Ray's memory monitor" if isinstance(exc, OutOfMemoryError) else "died"
+                        result = WorkerDied(f"Ray worker process {what} twice while running this task")
+                    yield index[ref], result
         finally:
             for ref in pending:
                 ray.cancel(ref)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Iterator, Sequence
+from contextlib import closing
 from typing import Any
 
 from crowdsim.distributed import RayUnavailableError, WorkerDied, import_ray, process_context, run_in_processes
@@ -36,20 +37,21 @@ def run_tasks(tasks: Sequence[EpisodeTask], workers: int = 1, backend: str = "lo
 
     backend "local": `workers` processes (1: this process); "ray": Ray tasks on the cluster at `address`
     ("auto", "HOST:PORT") or, with None, a local Ray instance of `workers` CPUs. An error that is not a
-    policy's (e.g. an env that cannot be built) stops the run and is raised. In the local pool, a task whose
-    worker process died twice yields {"record": error record} (outcome "error", the cause in `error`).
+    policy's (e.g. an env that cannot be built) stops the run and is raised. A task whose worker process died
+    twice (local pool or Ray) yields {"record": error record} (outcome "error", the cause in `error`).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
     if backend == "ray":
         require_ray()
-        yield from _run_on_ray(run_task, tasks, address, None if address else workers)
+        results = _run_on_ray(run_task, tasks, address, None if address else workers)
     elif workers <= 1 or len(tasks) <= 1:
-        for i, task in enumerate(tasks):
-            yield i, run_task(task)
+        results = ((i, run_task(task)) for i, task in enumerate(tasks))
     else:
         ctx = process_context(["envs.evaluation.episode"])  # imported once (no torch: not fork-safe)
-        for i, result in run_in_processes(run_task, tasks, min(workers, len(tasks)), ctx):
+        results = run_in_processes(run_task, tasks, min(workers, len(tasks)), ctx)
+    with closing(results):
+        for i, result in results:
             if isinstance(result, WorkerDied):
                 task = tasks[i]
                 _warn(f"crowdnav: episode {task.cell or 'episode'}/{task.policy.name}/seed {task.seed} recorded as "

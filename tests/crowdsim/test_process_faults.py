@@ -113,3 +113,17 @@ def test_make_dataset_raises_after_writing_the_rest(tmp_path, monkeypatch):
                                                            "running this task"}
     assert [p.name for ps in info.value.paths.values() for p in ps] == ["corridor_n5_s11.txt", "corridor_n5_s12.txt"]
     assert all(p.exists() for ps in info.value.paths.values() for p in ps)
+
+
+@pytest.mark.slow
+def test_ray_backend_reruns_once_then_reports_worker_died(tmp_path):
+    """The Ray backend keeps the same promise: one rerun (Ray's retry), then WorkerDied."""
+    pytest.importorskip("ray")
+    from crowdsim.distributed import run_on_ray
+
+    jobs = [Job(v, sleep_s=0.1) for v in range(5)]
+    jobs[1] = Job(1, kill="always")
+    jobs[3] = Job(3, kill="once", marker_dir=str(tmp_path))
+    out = dict(run_on_ray(square_or_die, jobs, num_cpus=2))
+    assert out.pop(1) == WorkerDied("Ray worker process died twice while running this task")
+    assert out == {i: (i, i * i) for i in (0, 2, 3, 4)} and (tmp_path / "killed-3").exists()
