@@ -22,15 +22,14 @@ from __future__ import annotations
 import argparse
 import ast
 import json
-import multiprocessing as mp
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
 
+from crowdsim.distributed import WorkerDied, process_context, run_in_processes
 from predictor.ethucy import DEFAULT_DATA_DIR
 
 DATA = DEFAULT_DATA_DIR / "eth"  # ETH/UCY (predictor.ethucy; ETH_UCY_DIR overrides it)
@@ -100,19 +99,10 @@ def build_mpc_config(robot, overrides: dict, base: str):
 _CACHE: dict = {}
 
 
-def _init_worker(predictor: str | None = None) -> None:
-    import torch
-
-    global PREDICTOR
-    PREDICTOR = predictor
-    torch.set_num_threads(1)
-
-
-PREDICTOR: str | None = None  # --predictor (None: the env's default); set in the worker by _init_worker
-
-
-def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, base: str):
-    key = (recording, policy, variant)
+def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, base: str,
+                    predictor: str | None = None):
+    """The (config, env, policy) of a task, built once per process; predictor: mpc-gpgraph's (None: the env's)."""
+    key = (recording, policy, variant, predictor)
     if key not in _CACHE:
         from envs.config import CrowdNavConfig
         from envs.env import CrowdNavEnv
@@ -127,7 +117,7 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
         env = CrowdNavEnv(cfg)
         mpc_cfg = build_mpc_config(cfg.robot, overrides, base)
         if policy == "mpc-gpgraph":
-            pol = GPGraphPolicy(mpc_cfg) if PREDICTOR is None else GPGraphPolicy(mpc_cfg, PREDICTOR)
+            pol = GPGraphPolicy(mpc_cfg) if predictor is None else GPGraphPolicy(mpc_cfg, predictor)
         else:
             pol = PlannerPolicy("mpc-cv", ConstantVelocityMPC(mpc_cfg), singleton_prediction)
         _CACHE[key] = (cfg, env, pol)
@@ -150,11 +140,14 @@ def _collision_geometry(env) -> dict:
 
 
 def run_one(task: tuple) -> dict:
-    """One episode: (recording, policy, variant, overrides, base, seed) -> a flat record."""
+    """One episode: (recording, policy, variant, overrides, base, seed[, predictor]) -> a flat record."""
+    import torch
+
     from envs.evaluation.episode import run_episode
 
-    recording, policy, variant, overrides, base, seed = task
-    cfg, env, pol = _env_and_policy(recording, policy, variant, overrides, base)
+    torch.set_num_threads(1)
+    recording, policy, variant, overrides, base, seed, *rest = task
+    cfg, env, pol = _env_and_policy(recording, policy, variant, overrides, base, *rest)
     result = run_episode(cfg, pol.name, seed, env=env, policy=pol)
     m = result.metrics
     rec = {"recording": Path(recording).stem, "policy": policy, "variant": variant, "seed": seed,
@@ -224,14 +217,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.overlay > 1:
         args.recordings = [overlay_recording(rec, args.overlay) for rec in args.recordings]
     variants = dict(parse_variant(v) for v in (args.variant or ["base"]))
-    tasks = [(rec, pol, name, ov, args.base, seed)
+    tasks = [(rec, pol, name, ov, args.base, seed, args.predictor)
              for rec in args.recordings for pol in args.policies for name, ov in variants.items()
              for seed in range(args.seed0, args.seed0 + args.episodes)]
     start = time.perf_counter()
-    ctx = mp.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx, initializer=_init_worker,
-                             initargs=(args.predictor,)) as pool:
-        records = list(pool.map(run_one, tasks, chunksize=max(1, args.episodes // 4)))
+    results: dict[int, dict] = {}
+    for i, rec in run_in_processes(run_one, tasks, args.workers, process_context()):  # heals a dead worker
+        if isinstance(rec, WorkerDied):
+            print(f"episode {tasks[i][:3]} seed {tasks[i][5]} left out: {rec}", file=sys.stderr)
+        else:
+            results[i] = rec
+    records = [results[i] for i in sorted(results)]
     print(f"{len(records)} episodes in {time.perf_counter() - start:.0f} s")
     for r in records:
         if r["outcome"] == "collision":
