@@ -135,8 +135,12 @@ _STARTED: Any = None  # in a worker of run_in_processes: the queue on which it a
 
 
 def _init_worker(started: Any) -> None:
+    """In each worker: keep the announcement pipe, and ignore SIGINT. A terminal's Ctrl-C reaches the whole process
+    group; the parent alone handles it (it stops submitting and waits for the running jobs), so a worker inside a
+    solve neither prints a stray KeyboardInterrupt nor dies half-way through writing a file."""
     global _STARTED
     _STARTED = started
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _call(fn: Callable[[J], R], index: int, job: J) -> R:

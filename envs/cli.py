@@ -237,6 +237,10 @@ def _benchmark(args: argparse.Namespace) -> int:
     run = board["run"]
     print(f"\n{run['episodes_run']} episodes run, {run['episodes_resumed']} already recorded, "
           f"{run['wall_time_s']:.0f} s; wrote {args.out}/leaderboard.json, .md, .png and records.jsonl")
+    if run["errors"]:
+        print(f"crowdnav: {run['errors']} episodes ended in an error (causes in {args.out}/records.jsonl, tracebacks "
+              f"in {args.out}/errors); rerun the same command to retry them", file=sys.stderr)
+        return 1
     return 0
 
 

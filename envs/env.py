@@ -1,4 +1,4 @@
-"""`CrowdNavEnv`: a robot crossing a grouped crowd, Gymnasium API (registered as `crowdnav/CrowdNav-v0`).
+"""`CrowdNavEnv`: a robot crossing a grouped crowd, Gymnasium API (registered as `crowdnav/CrowdNav-v1`).
 
 `step(action)` runs a fixed sequence:
     1. apply action: scale [-1, 1]^2 to the robot's limits, clip to the reachable accelerations, integrate

@@ -46,7 +46,8 @@ def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig, identity
 def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[PolicyConfig], out: Path,
                    data: Path = DEFAULT_DATA, recorded: Sequence[EpisodeRecord] = ()) -> BenchmarkPlan:
     """The tasks of cells x policies x seeds and which of them are already `recorded` (records of the output
-    folder and merged files). A record of the same episode made under other settings raises ValueError."""
+    folder and merged files; an episode recorded as an error is run again). A record of the same episode made under
+    other settings raises ValueError."""
     names = [p.name for p in policies]
     if len(set(names)) != len(names):
         raise ValueError(f"a policy is named twice: {names}")
@@ -68,6 +69,8 @@ def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Polic
                 elif old.fingerprint != fp:
                     raise ValueError(f"the records hold {cell.name}/{pcfg.name}/seed {seed} run under other "
                                      "settings (another suite version or policy config); use a new --out folder")
+                elif old.outcome == "error":  # a failed episode (a policy's exception, a worker that died) is retried
+                    todo.append(task)
                 else:
                     done.append(old)
     return BenchmarkPlan(tuple(tasks), tuple(todo), tuple(done))
@@ -111,6 +114,7 @@ def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Policy
     records = [r for r in merge_records([recorded, store.read()]) if r.key in wanted]
     board = leaderboard(suite, list(cells), list(policies), records)
     board["run"] = {"episodes_run": len(plan.todo), "episodes_resumed": len(plan.done), "workers": workers,
-                    "backend": backend, "wall_time_s": wall, "merged_files": [str(p) for p in merge]}
+                    "backend": backend, "wall_time_s": wall, "merged_files": [str(p) for p in merge],
+                    "errors": sum(r.outcome == "error" for r in records)}
     write_leaderboard(board, out)
     return board

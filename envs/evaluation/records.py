@@ -130,8 +130,9 @@ def read_records(path: str | Path) -> list[EpisodeRecord]:
 
 
 def merge_records(groups: Iterable[Iterable[EpisodeRecord]]) -> list[EpisodeRecord]:
-    """One record per episode key from several sources (first seen wins). Two records of the same key with
-    different fingerprints ran under different settings: ValueError."""
+    """One record per episode key from several sources (first seen wins, except that a result replaces an error:
+    an episode that failed and was run again counts by its result). Two records of the same key with different
+    fingerprints ran under different settings: ValueError."""
     seen: dict[tuple[str, str, int], EpisodeRecord] = {}
     for records in groups:
         for r in records:
@@ -141,6 +142,8 @@ def merge_records(groups: Iterable[Iterable[EpisodeRecord]]) -> list[EpisodeReco
             elif old.fingerprint != r.fingerprint:
                 raise ValueError(f"episode {r.key} was recorded under different settings "
                                  f"(fingerprints {old.fingerprint} and {r.fingerprint}); refusing to merge")
+            elif old.outcome == "error" and r.outcome != "error":
+                seen[r.key] = r
     return list(seen.values())
 
 

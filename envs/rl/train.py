@@ -1,4 +1,4 @@
-"""Train a PPO agent on `crowdnav/CrowdNav-v0`: `python -m envs.rl.train` or `crowdnav train`.
+"""Train a PPO agent on `crowdnav/CrowdNav-v1`: `python -m envs.rl.train` or `crowdnav train`.
 
     crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --steps 1000000 --out out/train/cc5
     crowdnav train --config run.toml --warm-start bc          # flags override the file's values

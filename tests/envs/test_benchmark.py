@@ -285,3 +285,25 @@ def test_cli_data_default_is_the_suites_default_data_folder():
 
     args = cli.build_parser().parse_args(["benchmark", "--suite", "smoke", "--out", "x"])
     assert args.data is suite_module.DEFAULT_DATA
+
+
+def test_an_episode_recorded_as_an_error_is_retried_on_resume_and_the_exit_says_so(tmp_path, capsys):
+    suite = parse_suite(TINY)
+    cells = suite.select(["circle-b"])
+    out = tmp_path / "bench"
+    first = run_benchmark(suite, cells, POLICIES, out, progress=False)
+    assert first["run"]["errors"] == 0
+    good = read_records(out / RECORDS)
+    victim = next(r for r in good if r.policy == "social-force" and r.seed == 1)
+    failed = replace(victim, outcome="error", error="RuntimeError: worker process died twice", steps=0)
+    RecordStore(out / "failed.jsonl").append(failed)  # the same episode as an earlier run recorded it: an error
+    others = [r for r in good if r.key != victim.key]
+    (out / RECORDS).unlink()
+    for r in [failed, *others]:
+        RecordStore(out / RECORDS).append(r)
+    assert [t.seed for t in plan_benchmark(suite, cells, POLICIES, out, recorded=read_records(out / RECORDS)).todo] \
+        == [victim.seed]  # only the failed episode is run again
+    again = run_benchmark(suite, cells, POLICIES, out, progress=False)
+    assert again["run"]["episodes_run"] == 1 and again["run"]["errors"] == 0
+    assert _untimed(again) == _untimed(first)  # its result replaced the error: the same leaderboard as before
+    assert merge_records([[failed], [victim]]) == [victim] and merge_records([[victim], [failed]]) == [victim]

@@ -225,3 +225,35 @@ def test_a_plugin_beside_the_command_loads_without_pythonpath_and_never_shadows_
     assert load_factory("json:dumps")([1]) == "[1]"  # the standard library's json, not the local file
     with pytest.raises(ValueError, match="cannot import module 'nowhere_plugin'"):
         load_factory("nowhere_plugin:make")
+
+
+ALWAYS_FAILS = """
+from envs.view import Decision
+
+
+class Broken:
+    name = "broken"
+
+    def reset(self, seed=None):
+        pass
+
+    def act(self, view):
+        raise RuntimeError("this policy always fails")
+
+
+def make(config, env):
+    return Broken()
+"""
+
+
+def test_a_benchmark_with_error_episodes_writes_its_leaderboard_and_exits_1_with_one_line(plugin_dir, capsys):
+    (plugin_dir / "flaky_plugin.py").write_text(ALWAYS_FAILS)
+    out = plugin_dir / "bench"
+    argv = ["benchmark", "--suite", "smoke", "--cells", "circle-low-invisible", "--policy", "flaky_plugin:make",
+            "--workers", "1", "--no-progress", "--out", str(out)]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("crowdnav: 2 episodes ended in an error") and "rerun" in err[0]
+    assert (out / "leaderboard.md").is_file() and len(list((out / "errors").glob("*.txt"))) == 2
+    assert main(argv) == 1  # rerun: the errors are retried (and fail again), not taken as results
+    assert len((out / "records.jsonl").read_text().splitlines()) == 4

@@ -54,7 +54,7 @@ def test_check_suite_is_the_reported_real_cells_at_other_seeds():
 
 def _record(cell: str, seed: int, outcome: str, kind: str | None = None) -> EpisodeRecord:
     return EpisodeRecord(policy="mpc-gpgraph", seed=seed, outcome=outcome, cell=cell,
-                         collision_with="pedestrian" if outcome == "collision" else None, collision_kind=kind)
+                         collision_with="pedestrian" if outcome == "collision" else None, at_fault=kind)
 
 
 def _write(path: Path, records: list[EpisodeRecord]) -> Path:
