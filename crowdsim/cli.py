@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
 
 from crowdsim.config import GroupConfig, SimConfig
+from crowdsim.files import check_writable_dir
 from crowdsim.generate import (
     BACKENDS,
     SPLITS,
@@ -62,21 +61,14 @@ def _spec(args: argparse.Namespace) -> RunSpec:
 
 def _check_out_dir(path: Path, subfolders: tuple[str, ...] = ()) -> None:
     """ValueError unless `path` (and each of its `subfolders`) is, or can be created as, a folder this process can
-    write into. Tried for real (a probe folder made and removed at once in the nearest existing ancestor), since
-    permission bits do not tell: root may write anywhere, yet not under /proc or on a read-only mount. Leaves
-    nothing behind."""
+    write into (`crowdsim.files.check_writable_dir`: tried for real). Leaves nothing behind."""
     for folder in (path, *(path / s for s in subfolders)):
         if folder.exists() and not folder.is_dir():
             raise ValueError(f"--out {path}: {folder} is a file, not a folder")
-    for p in (path, *path.parents):
-        if p.exists():
-            if not p.is_dir():
-                raise ValueError(f"--out {path}: {p} is a file, not a folder")
-            try:
-                os.rmdir(tempfile.mkdtemp(prefix=".crowdsim-probe-", dir=p))
-            except OSError as exc:
-                raise ValueError(f"--out {path}: cannot create folders in {p} ({exc.strerror or exc})") from None
-            return
+    try:
+        check_writable_dir(path)
+    except OSError as exc:
+        raise ValueError(f"--out {path}: {exc}") from None
 
 
 class _DefaultInt(int):

@@ -15,13 +15,13 @@ Files are written atomically (temporary file, then rename), and identical inputs
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from crowdsim.files import write_text_atomic
 from crowdsim.state import CrowdState
 
 FRAME_STRIDE = 10  # frame ids per recording step, as in the ETH/UCY benchmark files
@@ -54,18 +54,6 @@ class TrajectoryLog:
         if np.all((frame[1:] > frame[:-1]) | ((frame[1:] == frame[:-1]) & (ped[1:] > ped[:-1]))):
             return t  # the usual case, states added frame after frame: already in order, no sort needed
         return t[np.lexsort((ped, frame))]
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    """Write to `<path>.tmp`, then rename it over `path` (the temporary file is removed if interrupted)."""
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 # Text is built with numpy, all rows at once: each field of each row becomes a fixed-width run of ASCII
@@ -243,7 +231,7 @@ def write_files(folder: Path, files: RecordingFiles) -> dict[str, Path]:
     paths: dict[str, Path] = {}
     try:
         for kind, (file_name, text) in files.items():
-            _atomic_write(folder / file_name, text)
+            write_text_atomic(folder / file_name, text)
             paths[kind] = folder / file_name
     except BaseException:
         for path in paths.values():

@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ from safetensors.torch import save_file
 
 from predictor.backbones import BACKBONES
 from predictor.checkpoints import PACKAGE_CHECKPOINTS, checkpoint_file
+from predictor.files import write_atomic
 from predictor.model import GPGraph, GPGraphConfig, check_group_mode, check_group_threshold_scale
 
 FORMAT = "predictor.gpgraph/1"
@@ -195,16 +195,7 @@ def save_atomic(obj: dict, path: str | Path) -> None:
     """Write ``obj`` (its tensors moved to the CPU) with torch.save to a temporary file in the same folder,
     then rename over ``path``."""
     obj = to_cpu(obj)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        torch.save(obj, tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    write_atomic(path, lambda tmp: torch.save(obj, tmp))
 
 
 def save_model(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:

@@ -30,6 +30,7 @@ from predictor.checkpoint import CheckpointError, load_model
 from predictor.data import DataFormatError
 from predictor.device import DEVICES, resolve_device
 from predictor.evaluate import EvalConfig, evaluate
+from predictor.files import write_atomic
 from predictor.grouping import THRESHOLD_MODES
 from predictor.model import ASSIGNERS, GPGraph, GPGraphConfig, check_group_threshold_scale
 from predictor.sampling import PROTOCOLS
@@ -106,10 +107,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     print(format_table(result))
     if args.json:
         clean = {k: (None if isinstance(v, float) and v != v else v) for k, v in result.items()}  # NaN -> null
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(args.json).with_name(f".{Path(args.json).name}.part")
-        tmp.write_text(json.dumps(clean, indent=2, allow_nan=False) + "\n")
-        tmp.replace(args.json)
+        text = json.dumps(clean, indent=2, allow_nan=False) + "\n"
+        write_atomic(args.json, lambda tmp: Path(tmp).write_text(text))
     return 0
 
 
@@ -124,11 +123,10 @@ def cmd_predict(args: argparse.Namespace) -> int:
     if args.sample_level:
         model.config = replace(model.config, sample_level=args.sample_level)
     pred = GPGraphPredictor(model).predict(history, n_samples=args.samples, rng=np.random.default_rng(args.seed))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.part")
-    with open(tmp, "wb") as fh:  # a file handle: numpy writes exactly here (a path would gain ".npz")
-        np.savez(fh, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
-    tmp.replace(out)
+    def write(tmp: str) -> None:
+        with open(tmp, "wb") as fh:  # a file handle: numpy writes exactly here (a path would gain ".npz")
+            np.savez(fh, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
+    write_atomic(out, write)
     print(f"wrote {out}: samples {pred.samples.shape}, groups {pred.group_id.tolist()}")
     return 0
 

@@ -25,6 +25,7 @@ from predictor.batch import Batch, collate
 from predictor.checkpoint import FORMAT, load_state, read_file, save_atomic, save_model
 from predictor.device import model_device
 from predictor.evaluate import EvalConfig, evaluate
+from predictor.files import write_atomic
 from predictor.gaussian import masked_nll
 from predictor.grouping import pair_mask
 from predictor.model import GPGraph, GPGraphConfig
@@ -227,10 +228,11 @@ def _start_log(path: Path, fresh: bool) -> None:
         rows = list(csv.reader(f))
     if rows and tuple(rows[0]) != LOG_FIELDS:
         width = len(LOG_FIELDS)
-        tmp = path.with_name(f".{path.name}.part")
-        with tmp.open("w", newline="") as f:
-            csv.writer(f).writerows([list(LOG_FIELDS)] + [r + [""] * (width - len(r)) for r in rows[1:]])
-        tmp.replace(path)
+
+        def write(tmp: str) -> None:
+            with open(tmp, "w", newline="") as f:
+                csv.writer(f).writerows([list(LOG_FIELDS)] + [r + [""] * (width - len(r)) for r in rows[1:]])
+        write_atomic(path, write)
 
 
 LOSS_ONLY_FIELDS = ("bce_weight",)  # GPGraphConfig fields that change the loss, not the weights' layout

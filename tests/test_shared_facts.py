@@ -9,20 +9,26 @@
   and the env's scalar (`envs.geometry._segment_distance`) and compiled (`envs.kernels`) hull-test copies.
 - without twins: the default predictor name (`envs.config.DEFAULT_PREDICTOR`), the robot's body and limits
   (`planner.RobotConfig`; crowdsim's robot slot is `RobotSlot`), the planner names (`planner.PLANNERS`, which the
-  env's policies use), atomic file writes per package (`crowdsim.export`, `predictor.checkpoint`, `envs.atomic`).
+  env's policies use).
+- atomic file writes and the writable-folder check: owner `crowdsim.files` (crowdsim and envs use it); twin:
+  `predictor.files.write_atomic`.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from crowdsim import SimConfig
+from crowdsim.files import write_atomic as crowdsim_write_atomic
 from crowdsim.forces import closest_points_on_segments
 from envs.geometry import _segment_distance
 from envs.timing import DEFAULT_TIMING
 from planner import constant_velocity_prediction, point_segment_distances, segment_projection
 from predictor.ethucy import OBS_LEN, PRED_LEN, STEP_S
+from predictor.files import write_atomic as predictor_write_atomic
 
 
 def test_the_timing_has_one_definition_and_crowdsims_twin_matches_it():
@@ -57,3 +63,20 @@ def test_every_point_to_segment_twin_agrees_with_the_planners(seed):
     for i, (px, py) in enumerate(points):
         for w, s in enumerate(segs):
             assert _segment_distance(px, py, (s[0], s[1]), (s[2], s[3])) == pytest.approx(dist[i, w], abs=1e-12)
+
+
+@pytest.mark.parametrize("write_atomic", [crowdsim_write_atomic, predictor_write_atomic], ids=["crowdsim", "predictor"])
+def test_both_atomic_writers_keep_the_old_file_on_failure_and_leave_nothing_behind(write_atomic, tmp_path):
+    target = tmp_path / "sub" / "out.txt"
+    write_atomic(target, lambda tmp: Path(tmp).write_text("old"))
+    assert target.read_text() == "old" and target.stat().st_mode & 0o777 == 0o644
+
+    def half_then_fail(tmp: str) -> None:
+        Path(tmp).write_text("half")
+        raise KeyboardInterrupt  # Ctrl-C in the middle of a write
+
+    with pytest.raises(KeyboardInterrupt):
+        write_atomic(target, half_then_fail)
+    assert target.read_text() == "old" and sorted(p.name for p in target.parent.iterdir()) == ["out.txt"]
+    write_atomic(target, lambda tmp: Path(tmp).write_text("new"))
+    assert target.read_text() == "new" and sorted(p.name for p in target.parent.iterdir()) == ["out.txt"]
