@@ -12,14 +12,13 @@ plain cloning: a learner that drifts off the expert's states has never been show
 
 from __future__ import annotations
 
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from crowdsim.distributed import WorkerDied, run_in_processes
 from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
@@ -119,10 +118,13 @@ def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes:
     chunks = [(config, policy, seeds[i::workers], gamma, learner, beta) for i in range(workers) if seeds[i::workers]]
     if len(chunks) == 1:
         parts = [_chunk(chunks[0])]
-    else:
-        ctx = multiprocessing.get_context("forkserver")
-        with ProcessPoolExecutor(len(chunks), mp_context=ctx) as pool:
-            parts = list(pool.map(_chunk, chunks))
+    else:  # crowdsim's pool: a worker that dies (OOM) is replaced and its chunk rerun
+        results = dict(run_in_processes(_chunk, chunks, len(chunks)))
+        died = {i: r for i, r in results.items() if isinstance(r, WorkerDied)}
+        if died:
+            raise RuntimeError(f"demonstrations of seeds {[chunks[i][2] for i in died]} were lost: "
+                               f"{next(iter(died.values()))}")
+        parts = [results[i] for i in range(len(chunks))]
     order = sorted(((s, ep) for c, part in zip(chunks, parts, strict=True) for s, ep in zip(c[2], part, strict=True)),
                    key=lambda x: x[0])
     eps = [ep for _, ep in order]

@@ -78,6 +78,9 @@ def test_behaviour_cloning_fits_the_experts_actions():
     cfg = TINY.env_config()
     demos = collect_demos(cfg, "mpc-cv", episodes=2, seed=7)
     assert len(demos.actions) == len(demos.returns) == len(demos.obs["robot"]) and list(demos.episode_seed) == [7, 8]
+    pooled = collect_demos(cfg, "mpc-cv", episodes=2, seed=7, workers=2)  # crowdsim's process pool: the same demos
+    np.testing.assert_array_equal(pooled.actions, demos.actions)
+    assert all(np.array_equal(pooled.obs[k], demos.obs[k]) for k in demos.obs)
     assert set(demos.obs) == {"robot", "pedestrians", "pedestrian_mask", "group_ids"}
     model = PPO("MultiInputPolicy", CrowdNavEnv(cfg), seed=0, device="cpu",
                 policy_kwargs={"features_extractor_class": CrowdAttentionExtractor})
