@@ -10,19 +10,19 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
 from predictor.backbones import BACKBONES
 from predictor.batch import collate
+from predictor.ethucy import DEFAULT_DATA_DIR
 from predictor.gaussian import masked_nll
 from predictor.model import GPGraph, GPGraphConfig
 from predictor.train import make_batches, train_epoch
 from predictor.windows import Window, load_windows
 
-DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets" / "eth_ucy"
+DATA = DEFAULT_DATA_DIR  # run from the repository root, as every bench/ script
 
 
 def synthetic(n: int, rng: np.random.Generator) -> list[Window]:

@@ -12,9 +12,9 @@ import pytest
 from crowdsim.config import SimConfig
 from crowdsim.generate import RunSpec, generate
 from envs.replay import ReplayConfig, ReplayCrowd, assign_slots, infer_frame_increment
-from predictor.ethucy import read_groups
+from predictor.ethucy import DEFAULT_DATA_DIR, read_groups
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
+ETH_UCY = DEFAULT_DATA_DIR.absolute()  # resolved before any test changes the working folder
 
 # ped 1 over frames 0..20, ped 2 over 10..30, ped 3 only at 30; 10 frame ids per 0.4 s step
 ROWS = """0\t1\t0.13\t0.27
@@ -242,7 +242,7 @@ def test_start_past_the_end_is_rejected(tmp_path):
 
 
 def test_replays_a_benchmark_file():
-    path = SHARED / "datasets" / "eth_ucy" / "zara1" / "test" / "crowds_zara01.txt"
+    path = ETH_UCY / "zara1" / "test" / "crowds_zara01.txt"
     if not path.exists():
         pytest.skip(f"shared ETH/UCY data not found at {path}")
     table = np.loadtxt(path)
