@@ -1,6 +1,6 @@
 """Learning curves of `crowdnav train` runs: evaluation success and collision rate against env steps (and wall time).
 
-    python scripts/plot_learning_curves.py out/train/cc5-dagger out/train/cc5-cold --out docs/rl_learning_curves.png
+    python scripts/plot_learning_curves.py out/train/cc5-dagger out/train/cc5-cold --out docs/rl/learning_curves.png
 
 Each run folder's eval.csv (written by `envs.rl.train`) is one line per curve; the label is the folder name and
 the warm start read from its config.json. Wall time includes the warm start (demonstrations, cloning, DAgger).
