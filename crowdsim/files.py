@@ -50,7 +50,7 @@ def check_writable_dir(path: str | Path) -> Path:
     for p in (path.absolute(), *path.absolute().parents):
         if p.exists():
             if not p.is_dir():
-                raise OSError(f"cannot create {path}: {p} is a file, not a folder")
+                raise OSError(f"{p} is a file, not a folder")
             try:
                 os.rmdir(tempfile.mkdtemp(prefix=".probe-", dir=p))
             except OSError as exc:

@@ -72,8 +72,9 @@ def test_a_real_ctrl_c_stops_a_worker_pool_with_one_line(tmp_path):
 def test_write_files_is_whole_or_nothing(tmp_path, monkeypatch):
     """A Ctrl-C between a recording's files removes the ones already written (and the temporary file)."""
     import crowdsim.export as export
+    import crowdsim.files as files_module  # where the atomic rename lives
 
-    real, calls = export.os.replace, []
+    real, calls = files_module.os.replace, []
 
     def replace_then_ctrl_c(src, dst):
         calls.append(dst)
@@ -81,11 +82,11 @@ def test_write_files_is_whole_or_nothing(tmp_path, monkeypatch):
             raise KeyboardInterrupt
         real(src, dst)
 
-    monkeypatch.setattr(export.os, "replace", replace_then_ctrl_c)
+    monkeypatch.setattr(files_module.os, "replace", replace_then_ctrl_c)
     files = {k: (f"r.{k}", f"{k}\n") for k in ("trajectories", "groups", "labels", "metadata")}
     with pytest.raises(KeyboardInterrupt):
         export.write_files(tmp_path, files)
     assert len(calls) == 3 and list(tmp_path.iterdir()) == []
-    monkeypatch.setattr(export.os, "replace", real)
+    monkeypatch.setattr(files_module.os, "replace", real)
     assert sorted(p.name for p in export.write_files(tmp_path, files).values()) == sorted(
         f"r.{k}" for k in files)
