@@ -190,12 +190,13 @@ class CrowdNavEnv(gym.Env):
             self._peds_cache = (self._state, peds)
         return peds
 
-    def view(self) -> PolicyView:
-        """What a policy reads now (`envs.view.PolicyView`): the last observation and the typed scene, copies."""
+    def view(self, history: bool = True) -> PolicyView:
+        """What a policy reads now (`envs.view.PolicyView`): the last observation and the typed scene, copies; the
+        history window only when asked for."""
         if not self._obs:
             raise RuntimeError("view() before reset()")
         return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),
-                          self.config.robot, self.pedestrians(), self.history_window(),
+                          self.config.robot, self.pedestrians(), self.history_window() if history else None,
                           np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s)
 
     def action_for(self, decision: Decision) -> np.ndarray:

@@ -3,7 +3,8 @@
 Protocols (also in docs/envs.md; the README has a worked example):
 
     Policy      name: str; reset(seed) -> None; act(view: envs.view.PolicyView) -> envs.view.Decision;
-                optional `stats` (a `planner.PlanStats`) for plan/fallback/solve-time counts.
+                optional `stats` (a `planner.PlanStats`) for plan/fallback/solve-time counts, and
+                `reads_history = False` for a policy that reads only `view.obs` (`view.history` is then None).
                 A policy factory is called as factory(config: PolicyConfig, env: CrowdNavEnv): it may read the
                 env's settings there (config, spaces), but `act` sees only the view. A policy of the old
                 protocol (`reset(env, seed)`, `act(obs, env) -> action`) still runs, with a DeprecationWarning
@@ -45,6 +46,8 @@ def parse_sb3(spec: str) -> tuple[str, Path]:
 
 class SB3Policy:
     """A stable-baselines3 agent acting on the env's observation (deterministic by default)."""
+
+    reads_history = False  # it reads `view.obs` only
 
     def __init__(self, spec: str, env: Any, deterministic: bool = True, threads: int = 1) -> None:
         algo, path = parse_sb3(spec)

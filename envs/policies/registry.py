@@ -117,7 +117,8 @@ def _json_safe(obj: Any) -> Any:
 
 
 class Policy(Protocol):
-    """What the episode loop needs of a policy (`stats`, a `planner.PlanStats`, is optional)."""
+    """What the episode loop needs of a policy. Optional: `stats` (a `planner.PlanStats`), and `reads_history`
+    (False: the policy reads no `view.history`, which is then None and not computed; default True)."""
 
     name: str
 
@@ -131,7 +132,7 @@ class Policy(Protocol):
 def act(policy: Policy, env: CrowdNavEnv) -> np.ndarray:
     """One step of the episode loop: the policy's decision on the env's view, its annotations attached to the
     frames drawn from now on, and the env action (2,) float32 it asks for."""
-    decision = policy.act(env.view())
+    decision = policy.act(env.view(history=getattr(policy, "reads_history", True)))
     if decision.annotated:
         env.annotate(decision.plan, decision.predictions, decision.predicted_group_id)
     return env.action_for(decision)
@@ -210,6 +211,7 @@ class RandomPolicy:
     """Uniform random actions from its own Generator."""
 
     name = "random"
+    reads_history = False
 
     def __init__(self) -> None:
         self.stats = PlanStats()
@@ -274,6 +276,8 @@ class LegacyPolicy:
     """A plug-in written for the protocol before `act(view)`: `reset(env, seed)` and `act(obs, env) -> action`.
     Still runs (it is handed the env it was built for), with a DeprecationWarning once; migrate by reading
     `view.obs` (or the typed fields) in `act(view)` and returning `Decision(action=...)` or `Decision(control=...)`."""
+
+    reads_history = False  # it reads the observation (and, as before, the env it holds)
 
     def __init__(self, policy: Any, env: CrowdNavEnv) -> None:
         self.policy, self.env, self.name = policy, env, getattr(policy, "name", type(policy).__name__)

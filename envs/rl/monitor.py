@@ -35,6 +35,8 @@ def tensorboard_available() -> bool:
 class ModelPolicy:
     """A model being trained, as a harness policy (deterministic actions)."""
 
+    reads_history = False  # it reads `view.obs` only
+
     def __init__(self, model: Any, name: str = "ppo") -> None:
         self.model, self.name = model, name
 

@@ -149,3 +149,18 @@ def test_a_decision_holds_exactly_one_of_control_and_action():
     with pytest.raises(ValueError, match=r"shape \(2,\)"):
         Decision(control=np.zeros(3))
     assert not Decision(action=np.zeros(2)).annotated and Decision(control=np.zeros(2), plan=np.zeros((3, 2))).annotated
+
+
+
+def test_learned_agents_skip_the_history_window_and_planners_get_it():
+    env = CrowdNavEnv(replace(CFG, scenario="circle_crossing", n_pedestrians=5, robot_visible=False))
+    env.reset(seed=0)
+    seen = {}
+    for name in ("ppo-crowdnav", "random", "mpc-cv"):
+        policy = make_policy(name, env)
+        real_act = policy.act
+        policy.act = lambda view, real_act=real_act, name=name: seen.setdefault(name, view) and real_act(view)
+        policy.reset(0)
+        act(policy, env)
+    assert seen["ppo-crowdnav"].history is None and seen["random"].history is None  # obs-only: not computed
+    np.testing.assert_array_equal(seen["mpc-cv"].history, env.history_window())
