@@ -80,7 +80,7 @@ evaluate() {
 
 sweep() {
     # GP-Graph+S groups by average linkage at SCALE x its learned threshold; the scale is chosen on the validation
-    # split (RESULTS.md "Version 2.1" for the method), then `package` records it (SCALE=... package).
+    # split (docs/history/RESULTS-2026-11.md "Version 2.1" for the method), then `package` records it (SCALE=... package).
     mkdir -p "$EVAL"
     "$VENV/bin/python" scripts/sweep_group_threshold.py --checkpoint "$RUNS/gpgraph-stgcnn-synthetic/best.pt" \
         --data "$DATA" --split val --protocol iid --seed 0 --trials 3 --group-mode average \

@@ -209,7 +209,7 @@ def test_a_corrupt_agent_file_is_one_line_on_the_command_line(tmp_path, capsys):
 
 def test_packaged_ppo_agent_crosses_the_circle_on_unseen_seeds():
     """`ppo-crowdnav` loads by name and reaches the goal in most unseen circle-crossing episodes (5 invisible
-    pedestrians, the setting it was trained in; RESULTS.md reports 500 episodes). Seeds 400000+: never used in
+    pedestrians, the setting it was trained in; RESULTS.md reports 200 episodes). Seeds 400000+: never used in
     training (its resets draw from seeds 0-7) or in its checkpoint selection (100000+)."""
     from envs.evaluation.evaluate import evaluate
     from envs.policies import PolicyConfig
