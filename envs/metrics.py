@@ -1,4 +1,4 @@
-"""Per-episode navigation metrics (definitions in the README's "Metrics" section)."""
+"""Per-episode navigation metrics (definitions: docs/envs.md, "Evaluation metrics (envs)")."""
 
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ Episodes use seeds seed, seed + 1, ..., seed + episodes - 1 (the env's `reset(se
 robot's route, so every policy meets the same episodes) and run through `envs.evaluation.pool` (local process pool by
 default, or Ray). Outputs in `out_dir`: `<stem>.json` (the returned summary), `<stem>.md`, `<stem>.png`
 (rates and example trajectories) and `<stem>_seed<S>.rrd` for the first `record` episodes (none by default). Metric
-definitions: the README's "Evaluation metrics (envs)" and `envs.evaluation.stats.aggregate`.
+definitions: docs/envs.md, "Evaluation metrics (envs)", and `envs.evaluation.stats.aggregate`.
 """
 
 from __future__ import annotations
