@@ -42,6 +42,8 @@ def known_frame_step(path: Path | str) -> float | None:
     for suffix in ("_train", "_val", "_test"):
         stem = stem.removesuffix(suffix)
     return KNOWN_FRAME_STEPS_S.get(stem)
+
+
 _SNAP = 1e-9  # times within this many annotation steps of a whole step are snapped onto it
 
 
