@@ -80,6 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "own by file name, biwi_eth 0.6667 and the others 0.4; any other file 0.4)")
     e.add_argument("--groups-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: group file (one group of ped ids per line)")
+    e.add_argument("--group-overlaps", choices=("error", "merge"), default=None,
+                   help="scenario replay: a pedestrian listed on two lines of --groups-file is an error (default), "
+                   "or merges those groups (each merge is named on stderr)")
     add_backend_options(e)
 
     b = sub.add_parser("benchmark", help="run policies on every episode of a named suite; leaderboard and "
@@ -128,9 +131,13 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
             raise UsageError("--pedestrians and --invisible do not apply to --scenario replay (recorded people)")
         from envs.replay import ReplayConfig
 
-        kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file, frame_step_s=args.frame_step)
-    elif args.replay_file is not None or args.groups_file is not None or args.frame_step is not None:
-        raise UsageError("--replay-file/--groups-file/--frame-step need --scenario replay")
+        if args.group_overlaps is not None and args.groups_file is None:
+            raise UsageError("--group-overlaps needs --groups-file")
+        kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file, frame_step_s=args.frame_step,
+                                    group_overlaps=args.group_overlaps or "error")
+    elif args.replay_file is not None or args.groups_file is not None or args.frame_step is not None \
+            or args.group_overlaps is not None:
+        raise UsageError("--replay-file/--groups-file/--frame-step/--group-overlaps need --scenario replay")
     else:
         kw["robot_visible"] = not args.invisible
     if args.pedestrians is not None:
@@ -167,6 +174,15 @@ def _frame_step_warning(args: argparse.Namespace) -> str | None:
             f"--frame-step {args.frame_step} s instead")
 
 
+def _group_notes(config: CrowdNavConfig) -> tuple[str, ...]:
+    """The merges of overlapping groups in a replay's group file (`--group-overlaps merge`), one line each."""
+    if config.replay is None or config.replay.groups_path is None or config.replay.group_overlaps != "merge":
+        return ()
+    from envs.env import make_crowd
+
+    return make_crowd(config).group_notes
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from envs.atomic import check_writable_dir, check_writable_file, write_json_atomic, write_text_atomic
     from envs.evaluation.evaluate import Interrupted, check_setup, evaluate
@@ -187,6 +203,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         check_setup(pcfg, config)
     if (warning := _frame_step_warning(args)) is not None:  # after every check: a misuse stays one line
         print(warning, file=sys.stderr)
+    for note in _group_notes(config):
+        print(f"crowdnav: warning: {note}", file=sys.stderr)
     results = []
     for pcfg in configs:
         try:

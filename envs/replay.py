@@ -16,6 +16,7 @@ the recording, fixed or drawn at `reset`; `CrowdState.time_s` counts from the ep
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,12 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.state import CrowdState
-from predictor.ethucy import read_groups, read_trajectories  # the one ETH/UCY reader (torch-free)
+from predictor.ethucy import (  # the one ETH/UCY reader (torch-free)
+    GROUP_OVERLAPS,
+    GroupFileWarning,
+    read_groups,
+    read_trajectories,
+)
 
 START_MODES = ("random", "fixed")
 DEFAULT_FRAME_STEP_S = 0.4  # the ETH/UCY format's annotation step (frame ids +10 per 0.4 s); crowdsim exports use it
@@ -55,6 +61,8 @@ class ReplayConfig:
         path: trajectory file, rows `frame ped x y` (m), tab- or whitespace-separated.
         groups_path: optional group file, one group per line (ped ids separated by whitespace); a pedestrian
             not listed is its own group. None: every pedestrian is alone.
+        group_overlaps: a pedestrian listed on two lines of the group file: "error" (refuse the file) or "merge"
+            (merge those lines' groups; each merge is noted in `ReplayCrowd.group_notes`; `predictor.ethucy`).
         frame_step_s: seconds per annotation step; None (the default): the known recording's own
             (`known_frame_step`: biwi_eth 0.6667, the other ETH/UCY files 0.4), else `DEFAULT_FRAME_STEP_S`.
             The config holds the resolved value.
@@ -78,6 +86,7 @@ class ReplayConfig:
 
     path: Path | str
     groups_path: Path | str | None = None
+    group_overlaps: str = "error"
     frame_step_s: float | None = None
     frame_increment: float | None = None
     dt_s: float = 0.1
@@ -99,6 +108,8 @@ class ReplayConfig:
             object.__setattr__(self, "frame_step_s", known_frame_step(self.path) or DEFAULT_FRAME_STEP_S)
         if self.groups_path is not None:
             object.__setattr__(self, "groups_path", Path(self.groups_path))
+        if self.group_overlaps not in GROUP_OVERLAPS:
+            raise ValueError(f"unknown group_overlaps {self.group_overlaps!r}; valid: {', '.join(GROUP_OVERLAPS)}")
         for key in ("frame_step_s", "dt_s", "ped_radius_m"):
             _check(math.isfinite(getattr(self, key)) and getattr(self, key) > 0, f"{key} must be > 0")
         for key in ("route_margin_m", "route_clearance_m", "bounds_margin_m", "start_time_s", "min_remaining_s"):
@@ -211,7 +222,11 @@ class ReplayCrowd:
         label = np.full(len(self.ped_ids), -1, np.int64)
         index = {int(p): i for i, p in enumerate(self.ped_ids)}
         path = self.config.groups_path
-        for g, members in enumerate(read_groups(path) if path is not None else []):
+        with warnings.catch_warnings(record=True) as merges:  # kept as notes, not printed by every worker
+            warnings.simplefilter("always", GroupFileWarning)
+            groups = read_groups(path, self.config.group_overlaps) if path is not None else ()
+        self.group_notes = tuple(str(w.message) for w in merges)
+        for g, members in enumerate(groups):
             label[[index[m] for m in members if m in index]] = g
         lone = label < 0
         label[lone] = label.max(initial=-1) + 1 + np.arange(int(lone.sum()))

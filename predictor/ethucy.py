@@ -12,7 +12,8 @@ One policy for all readers; anything else raises `DataFormatError` (a `ValueErro
 * every field must be a finite number (no NaN or inf);
 * frame, ped and group ids must be whole numbers of magnitude below 2**53 (exact in float64);
 * a (frame, ped) pair may appear only once (a duplicate row is an error, never silently merged);
-* a pedestrian belongs to at most one group, and is listed once;
+* a pedestrian belongs to at most one group, and is listed once (`read_groups(..., overlaps="merge")` merges
+  the groups of a pedestrian listed twice instead, with a `GroupFileWarning` naming the lines);
 * the file must be UTF-8 text with at least one record;
 * blank lines are skipped. Other separators, such as commas, are errors.
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -109,11 +111,27 @@ def read_labels(path: str | Path) -> np.ndarray:
     return _read_keyed(path, LABEL_FIELDS, n_ids=3)
 
 
-def read_groups(path: str | Path) -> tuple[tuple[int, ...], ...]:
-    """The groups of a group file, one tuple of ped ids per non-blank line, file order."""
+GROUP_OVERLAPS = ("error", "merge")  # what read_groups does with a pedestrian listed on two lines
+
+
+class GroupFileWarning(UserWarning):
+    """A group file was read with `overlaps="merge"` and listed somebody twice: the groups were merged."""
+
+
+def read_groups(path: str | Path, overlaps: str = "error") -> tuple[tuple[int, ...], ...]:
+    """The groups of a group file, one tuple of ped ids per non-blank line, file order.
+
+    A pedestrian listed twice (on two lines, or twice on one) is a `DataFormatError` naming both lines, unless
+    `overlaps` is "merge": then the lines that share somebody become one group (in the place of the first of them,
+    members in order of first mention, each once), with one `GroupFileWarning` per pedestrian listed twice, naming
+    the lines. The published students003 annotation needs it (four pedestrians on two lines each)."""
+    if overlaps not in GROUP_OVERLAPS:
+        raise ValueError(f"unknown overlaps {overlaps!r}; valid: {', '.join(GROUP_OVERLAPS)}")
     path = Path(path)
     groups: list[tuple[int, ...]] = []
-    where: dict[int, int] = {}
+    linenos: list[int] = []
+    where: dict[int, int] = {}  # ped -> index of the first line that lists it
+    parent: list[int] = []  # union-find over line indices (merge)
     for lineno, line in _lines(path):
         try:
             values = [float(tok) for tok in line.split()]
@@ -124,9 +142,32 @@ def read_groups(path: str | Path) -> tuple[tuple[int, ...], ...]:
                 raise DataFormatError(f"{path}:{lineno}: non-finite ped id in {line.strip()[:80]!r}")
             _check_id(path, lineno, "ped id", value)
         ids = tuple(int(v) for v in values)
+        parent.append(len(groups))
         for ped in ids:
             if ped in where:
-                raise DataFormatError(f"{path}:{lineno}: pedestrian {ped} is already listed (line {where[ped]})")
-            where[ped] = lineno
+                first = linenos[where[ped]] if where[ped] < len(linenos) else lineno
+                if overlaps == "error":
+                    raise DataFormatError(f"{path}:{lineno}: pedestrian {ped} is already listed (line {first}); "
+                                          "overlaps='merge' (crowdnav --group-overlaps merge) merges such groups")
+                warnings.warn(f"{path}: pedestrian {ped} is listed on lines {first} and {lineno}: their groups are "
+                              "merged into one", GroupFileWarning, stacklevel=2)
+                here, there = _root(parent, len(groups)), _root(parent, where[ped])
+                parent[max(here, there)] = min(here, there)  # the earliest line represents the merged group
+            else:
+                where[ped] = len(groups)
         groups.append(ids)
-    return tuple(groups)  # an empty file: no groups (everyone alone)
+        linenos.append(lineno)
+    if overlaps == "error":
+        return tuple(groups)  # an empty file: no groups (everyone alone)
+    merged: dict[int, list[int]] = {}
+    for i, ids in enumerate(groups):
+        members = merged.setdefault(_root(parent, i), [])
+        members.extend(p for p in ids if p not in members)
+    return tuple(tuple(m) for m in merged.values())
+
+
+def _root(parent: list[int], i: int) -> int:
+    """The representative line of line index i's merged group (union-find, the earliest line of it)."""
+    while parent[i] != i:
+        i = parent[i]
+    return i

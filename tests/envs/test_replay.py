@@ -321,3 +321,29 @@ def test_cli_replay_of_biwi_eth_runs_at_its_own_rate_unless_told(tmp_path, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "warning" in err[0] and "0.6667" in err[0]
     assert json.loads((tmp_path / "b" / "random.json").read_text())["config"]["replay_frame_step_s"] == 0.4
+
+
+def test_a_group_file_listing_somebody_twice_is_refused_or_merged_and_said_once(tmp_path, capsys):
+    from envs.cli import main
+
+    rows = (f"{10 * t}\t{p}\t{0.4 * t:.1f}\t{p:.1f}\n" for t in range(60) for p in (1, 2, 3, 4))
+    rec = _write(tmp_path, "".join(rows))
+    groups = _write(tmp_path, "1 2\n2 3\n", "g.txt")
+    with pytest.raises(ValueError, match="already listed"):
+        ReplayCrowd(ReplayConfig(path=rec, groups_path=groups))
+    crowd = ReplayCrowd(ReplayConfig(path=rec, groups_path=groups, group_overlaps="merge"))
+    state = crowd.reset(0)
+    ids = dict(zip(state.ped_id[state.active].tolist(), state.group_id[state.active].tolist(), strict=True))
+    assert ids[1] == ids[2] == ids[3] != ids[4]  # 1, 2 and 3 walk together after the merge
+    note = f"{groups}: pedestrian 2 is listed on lines 1 and 2: their groups are merged into one"
+    assert crowd.group_notes == (note,)
+    with pytest.raises(ValueError, match="valid: error, merge"):
+        ReplayConfig(path=rec, group_overlaps="union")
+    base = ["evaluate", "--policy", "random", "--scenario", "replay", "--replay-file", str(rec), "--groups-file",
+            str(groups), "--episodes", "1", "--time-limit", "1", "--workers", "1", "--no-progress"]
+    assert main([*base, "--out", str(tmp_path / "refused")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "already listed (line 1)" in err[0] and not (tmp_path / "refused").exists()
+    assert main([*base, "--group-overlaps", "merge", "--out", str(tmp_path / "merged")]) == 0
+    assert capsys.readouterr().err.splitlines() == [f"crowdnav: warning: {crowd.group_notes[0]}"]
+    assert main(["evaluate", "--policy", "random", "--group-overlaps", "merge", "--out", str(tmp_path / "x")]) == 2

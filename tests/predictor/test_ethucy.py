@@ -140,3 +140,39 @@ def test_data_dir_has_one_owner_and_an_environment_override(tmp_path):
         run_env = env if override is None else {**env, "ETH_UCY_DIR": override}
         out = subprocess.run([sys.executable, "-c", code], env=run_env, capture_output=True, text=True, check=True)
         assert out.stdout.strip() == expected
+
+
+def test_overlapping_groups_are_refused_or_merged_with_a_warning_naming_the_lines(tmp_path):
+    from predictor.ethucy import GroupFileWarning
+
+    path = _write(tmp_path, "1 2\n3 4\n2 5\n6\n6 7\n8 8\n", "g.txt")
+    with pytest.raises(DataFormatError, match=r"g\.txt:3: pedestrian 2 is already listed \(line 1\).*merge"):
+        read_groups(path)
+    with pytest.warns(GroupFileWarning) as caught:
+        merged = read_groups(path, overlaps="merge")
+    assert merged == ((1, 2, 5), (3, 4), (6, 7), (8,))  # in the place of the first line, members once each
+    assert [str(w.message).split(": ", 1)[1] for w in caught] == [
+        "pedestrian 2 is listed on lines 1 and 3: their groups are merged into one",
+        "pedestrian 6 is listed on lines 4 and 5: their groups are merged into one",
+        "pedestrian 8 is listed on lines 6 and 6: their groups are merged into one"]
+    chain = _write(tmp_path, "1 2\n3 4\n5 6\n4 6 2\n", "c.txt")  # one line joins three earlier groups
+    with pytest.warns(GroupFileWarning):
+        assert read_groups(chain, overlaps="merge") == ((1, 2, 3, 4, 5, 6),)
+    with pytest.raises(ValueError, match="valid: error, merge"):
+        read_groups(path, overlaps="ignore")
+
+
+def test_the_published_students003_groups_merge_as_their_readme_says():
+    from predictor.ethucy import GroupFileWarning
+
+    path = DEFAULT_DATA_DIR.parent / "eth_ucy_groups" / "students003.groups.txt"
+    if not path.is_file():
+        pytest.skip(f"{path} is not here")
+    with pytest.raises(DataFormatError, match="already listed"):
+        read_groups(path)
+    with pytest.warns(GroupFileWarning) as caught:
+        groups = read_groups(path, overlaps="merge")
+    named = sorted(int(str(w.message).split("pedestrian ")[1].split()[0]) for w in caught)
+    assert named == [103, 121, 421, 422] and len(groups) == 104 - 3  # three pairs of lines become one group each
+    members = [p for g in groups for p in g]
+    assert len(members) == len(set(members))  # nobody in two groups after the merge
