@@ -26,6 +26,7 @@ FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-e
 # ppo-crowdnav is an SB3 agent). PolicyConfig.deterministic has no flag.
 POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "mpc-gpgraph": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
+    "mpc-oracle": ("--replan-every", "--mpc"),
     "mpc-cv": ("--replan-every", "--mpc"),
     "mpc-none": ("--replan-every", "--mpc"),
     "social-force": (),
@@ -73,7 +74,7 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
     p.add_argument("--samples", type=int, default=DefaultInt(PolicyConfig.n_samples), metavar="K",
                    help="predicted samples per plan (mpc-gpgraph, plug-ins)")
     p.add_argument("--replan-every", type=int, default=DefaultInt(REPLAN_EVERY_STEPS), metavar="STEPS",
-                   help="env steps between re-plans (mpc-gpgraph, mpc-cv, mpc-none, plug-ins)")
+                   help="env steps between re-plans (mpc-gpgraph, mpc-oracle, mpc-cv, mpc-none, plug-ins)")
     p.add_argument("--threads", type=int, default=DefaultInt(PolicyConfig.threads),
                    help="torch threads per process (mpc-gpgraph, ppo-crowdnav, sb3: agents, plug-ins)")
     p.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE",

@@ -6,6 +6,7 @@ robot visibility); `envs.replay.ReplayCrowd` replays an ETH/UCY-format file (non
 
 from __future__ import annotations
 
+import copy
 from typing import Protocol
 
 import numpy as np
@@ -43,6 +44,10 @@ class Crowd(Protocol):
     def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """A start (2,) and a goal (2,) across the scene for the robot, m."""
 
+    def future(self, ped_ids: np.ndarray, times_s: np.ndarray) -> np.ndarray:
+        """Privileged (the oracle's): where pedestrians `ped_ids` (N,) will be at `times_s` (T,) s from now, (T, N, 2)
+        m, NaN where one is not in the scene then. The crowd itself is left exactly as it was."""
+
 
 class SimCrowd:
     """`crowdsim.CrowdSimulator` stepped at the env's time step (`config.record_dt_s`)."""
@@ -66,6 +71,27 @@ class SimCrowd:
 
     def clear_robot(self) -> None:
         self.sim.clear_robot()
+
+    def future(self, ped_ids: np.ndarray, times_s: np.ndarray) -> np.ndarray:
+        """See `Crowd.future`: a fork of the simulation (its state and random generator) stepped ahead, the robot
+        moving on at its current velocity (the pedestrians who see it react to that). With a robot the crowd does
+        not see, this is the future that happens, exactly, unless two bodies touch at the fork (pymunk does not copy
+        its contact cache: millimetres a step there). times_s: whole multiples of `dt_s`."""
+        steps = np.rint(np.asarray(times_s, float) / self.dt_s).astype(np.int64)
+        if np.any(steps < 1) or not np.allclose(steps * self.dt_s, times_s):
+            raise ValueError(f"times_s must be positive whole multiples of dt_s = {self.dt_s}, got {times_s}")
+        sim = self.sim
+        fork = copy.deepcopy(sim, {id(sim.config): sim.config, id(sim.scenario): sim.scenario})  # those are read-only
+        robot = fork.robot
+        out = np.full((len(steps), len(ped_ids), 2), np.nan)
+        want = {int(k): i for i, k in enumerate(steps)}
+        for k in range(1, int(steps.max()) + 1):
+            if robot is not None:
+                fork.set_robot(robot.pos + k * self.dt_s * robot.vel, robot.vel, robot.radius_m)
+            state = fork.step()
+            if k in want:
+                out[want[k]] = rows_of(state, ped_ids)
+        return out
 
     def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """A start and a goal (2,) m for this scenario (see `ROUTES`; other scenarios: `side_to_side`)."""
@@ -142,3 +168,15 @@ def door_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, n
 
 ROUTES = {"circle_crossing": circle_route, "plaza": plaza_route, "crossing": street_route,
           "corridor": corridor_route, "bottleneck": door_route}
+
+
+def rows_of(state: CrowdState, ped_ids: np.ndarray) -> np.ndarray:
+    """Positions (N, 2) m of pedestrians `ped_ids` (N,) in `state`, NaN for those not in it."""
+    out = np.full((len(ped_ids), 2), np.nan)
+    active = np.flatnonzero(state.active)
+    order = np.argsort(state.ped_id[active], kind="stable")
+    known = state.ped_id[active][order]
+    at = np.minimum(np.searchsorted(known, ped_ids), max(len(known) - 1, 0))
+    found = (known[at] == ped_ids) if len(known) else np.zeros(len(ped_ids), bool)
+    out[found] = state.pos[active[order[at[found]]]]
+    return out

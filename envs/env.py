@@ -190,14 +190,21 @@ class CrowdNavEnv(gym.Env):
             self._peds_cache = (self._state, peds)
         return peds
 
-    def view(self, history: bool = True) -> PolicyView:
+    def view(self, history: bool = True, future: bool = False) -> PolicyView:
         """What a policy reads now (`envs.view.PolicyView`): the last observation and the typed scene, copies; the
-        history window only when asked for."""
+        history window only when asked for; the pedestrians' true future only when asked for (reference policies)."""
         if not self._obs:
             raise RuntimeError("view() before reset()")
+        p = self.pedestrians()
+        ahead = None
+        if future:
+            if not hasattr(self.crowd, "future"):
+                raise ValueError(f"the crowd of scenario {self.config.scenario!r} cannot tell its future")
+            t = self.timing
+            ahead = self.crowd.future(p.ped_id, t.step_s * np.arange(1, t.pred_len + 1))
         return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),
-                          self.config.robot, self.pedestrians(), self.history_window() if history else None,
-                          np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s)
+                          self.config.robot, p, self.history_window() if history else None,
+                          np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s, ahead)
 
     def action_for(self, decision: Decision) -> np.ndarray:
         """The action (2,) float32 a policy's decision asks for: its action, or the action of its control."""

@@ -322,6 +322,17 @@ class ReplayCrowd:
         pos = self._state.pos[self._state.active]
         return float(np.linalg.norm(pos - point, axis=1).min()) if len(pos) else np.inf
 
+    def future(self, ped_ids: np.ndarray, times_s: np.ndarray) -> np.ndarray:
+        """Privileged (the oracle's; `envs.crowd.Crowd.future`): the recorded positions (T, N, 2) m of pedestrians
+        `ped_ids` (N,) at `times_s` (T,) s from now, interpolated as the replay does, NaN once a track has ended."""
+        out = np.full((len(times_s), len(ped_ids), 2), np.nan)
+        for k, t in enumerate(np.asarray(times_s, float)):
+            ids, pos, _ = self.positions_at(self.recording_time_s + t)
+            at = np.minimum(np.searchsorted(ids, ped_ids), max(len(ids) - 1, 0))
+            found = (ids[at] == ped_ids) if len(ids) else np.zeros(len(ped_ids), bool)
+            out[k, found] = pos[at[found]]
+        return out
+
     # ----- state -----
     def positions_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pedestrians present at recording time `time_s` (s): their ids (A,) (ascending), positions (A, 2) m

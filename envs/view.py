@@ -40,6 +40,9 @@ class PolicyView:
     history: (obs_len, N, 2) their positions `timing.step_s` apart, the last row now (rows of `pedestrians`); None
         for a policy that declares `reads_history = False` (learned agents: the window costs ~0.1 ms a step).
     walls: (W, 4) wall segments x0, y0, x1, y1. timing: the prediction timing. dt_s: the env step, s.
+    future: privileged, for reference policies only (`reads_future = True`, e.g. `mpc-oracle`): where the
+        pedestrians will be, (pred_len, N, 2) m at +step_s ... +pred_len step_s (rows of `pedestrians`), NaN where
+        one will have left (`envs.crowd.Crowd.future`); None for every other policy.
     """
 
     obs: dict[str, np.ndarray]
@@ -51,6 +54,7 @@ class PolicyView:
     walls: np.ndarray
     timing: PredictionTiming
     dt_s: float
+    future: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

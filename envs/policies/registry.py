@@ -3,6 +3,8 @@
 Registry names:
 
     mpc-gpgraph   MPC + a GP-Graph predictor (default the shipped synthetic one): K samples, its own groups
+    mpc-oracle    the same MPC fed the pedestrians' true future and true groups: the prediction upper bound (a
+                  reference; it alone reads the privileged `view.future`)
     mpc-cv        MPC + constant-velocity prediction, every pedestrian its own group
     mpc-none      MPC with pedestrians frozen where they stand (no prediction), no groups
     social-force  reactive social-force robot (every env step)
@@ -132,7 +134,8 @@ class Policy(Protocol):
 def act(policy: Policy, env: CrowdNavEnv) -> np.ndarray:
     """One step of the episode loop: the policy's decision on the env's view, its annotations attached to the
     frames drawn from now on, and the env action (2,) float32 it asks for."""
-    decision = policy.act(env.view(history=getattr(policy, "reads_history", True)))
+    decision = policy.act(env.view(history=getattr(policy, "reads_history", True),
+                                   future=getattr(policy, "reads_future", False)))
     if decision.annotated:
         env.annotate(decision.plan, decision.predictions, decision.predicted_group_id)
     return env.action_for(decision)
@@ -196,6 +199,33 @@ class GPGraphPolicy(PlannerPolicy):
                              history=view.history, step_s=t.step_s)
 
 
+def oracle_prediction(view: PolicyView) -> PedPrediction:
+    """The pedestrians' true future (`view.future`, privileged) as a one-sample prediction, with their true groups.
+    A pedestrian who leaves within the horizon is held where it was last (the planner takes no partial tracks)."""
+    p, t = view.pedestrians, view.timing
+    if view.future is None:
+        raise ValueError("the oracle needs the view's future (env.view(future=True), as envs.policies.act asks for "
+                         "policies with reads_future = True)")
+    if len(p.pos) == 0:
+        return empty_prediction(t.pred_len, t.step_s)
+    future = np.concatenate([p.pos[None], view.future])  # (1 + T, N, 2): now, then the future
+    for k in range(1, len(future)):  # hold the last known position where a track has ended
+        gone = np.isnan(future[k, :, 0])
+        future[k, gone] = future[k - 1, gone]
+    return PedPrediction(future[None, 1:], p.radius, p.group_id, np.ones(len(p.pos), bool), current=p.pos,
+                         history=view.history, step_s=t.step_s)
+
+
+class OraclePolicy(PlannerPolicy):
+    """`mpc-oracle`: the MPC of mpc-gpgraph fed the true future instead of a prediction (a reference, not a deployable
+    policy: it reads `view.future`, which the env computes for it alone; its plan time is reported, not budgeted)."""
+
+    reads_future = True
+
+    def __init__(self, config: MPCConfig, replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
+        super().__init__("mpc-oracle", MPCPlanner(config), oracle_prediction, replan_every_steps)
+
+
 def singleton_prediction(view: PolicyView) -> PedPrediction:
     """The observed history as a (placeholder) prediction with every pedestrian its own group; the
     baseline planners replace the positions (constant velocity, frozen)."""
@@ -249,6 +279,7 @@ def _agent(name: str) -> Factory:
 POLICIES: dict[str, Factory] = {
     "mpc-gpgraph": lambda cfg, mpc, env: GPGraphPolicy(mpc, cfg.predictor, cfg.n_samples, cfg.threads,
                                                        cfg.replan_every_steps, env.timing),
+    "mpc-oracle": lambda cfg, mpc, env: OraclePolicy(mpc, cfg.replan_every_steps),
     "mpc-cv": _planner("mpc-cv"),
     "mpc-none": _planner("mpc-none"),
     "social-force": _planner("social-force", every=1),

@@ -1,0 +1,99 @@
+"""mpc-oracle: the MPC fed the pedestrians' true future. The env computes that future for it alone (a fork of the
+simulation, or the recording read ahead); no other policy can see it."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from envs import CrowdNavConfig, CrowdNavEnv
+from envs.crowd import rows_of
+from envs.policies import POLICIES, act, make_policy
+from envs.replay import ReplayConfig
+
+ACTION = np.array([0.4, 0.1], np.float32)
+
+
+@pytest.mark.parametrize("scenario, n", [("circle_crossing", 8), ("corridor", 20)])
+def test_the_forked_crowd_foresees_what_happens_and_the_crowd_is_left_as_it_was(scenario, n):
+    cfg = CrowdNavConfig(scenario=scenario, n_pedestrians=n, robot_visible=False)
+    seen, blind = CrowdNavEnv(cfg), CrowdNavEnv(cfg)
+    for env in (seen, blind):
+        env.reset(seed=3)
+        for _ in range(3):
+            env.step(ACTION)
+    view = seen.view(future=True)
+    assert view.future.shape == (12, len(view.pedestrians.pos), 2)
+    happened = []
+    for k in range(1, 49):  # the crowds themselves, 4.8 s on (the env would stop at a contact with the robot)
+        state, other = seen.crowd.step(), blind.crowd.step()
+        np.testing.assert_array_equal(state.pos, other.pos)  # forking changed nothing in the crowd
+        if k % 4 == 0:
+            happened.append(rows_of(state, view.pedestrians.ped_id))
+    happened = np.array(happened)
+    np.testing.assert_array_equal(np.isnan(view.future), np.isnan(happened))
+    np.testing.assert_allclose(view.future, happened, atol=1e-9)  # with an invisible robot: exactly the future
+
+
+def _recording(tmp_path, name: str, step_into_the_route_after_s: float | None) -> ReplayConfig:
+    """Walker 1 crosses the robot's route from y = 3 southwards at x = 5; walker 2 walks far away; walker 3 stands
+    in a far corner (so that both copies span the same box: the replay draws the robot's route from it). In the
+    altered copy, walker 1 stands on the route at x = 3 from `step_into_the_route_after_s` on."""
+    rows = []
+    for f in range(80):  # 0.4 s frames, 32 s
+        t = 0.4 * f
+        x1, y1 = 5.0, 3.0 - 0.25 * t
+        if step_into_the_route_after_s is not None and t > step_into_the_route_after_s:
+            x1, y1 = 3.0, 0.0
+        rows += [(10 * f, 1, x1, y1), (10 * f, 2, -20.0 + 0.3 * t, 20.0), (10 * f, 3, 12.0, -8.0)]
+    path = tmp_path / name
+    path.write_text("".join(f"{f}\t{p}\t{x:.3f}\t{y:.3f}\n" for f, p, x, y in rows))
+    return ReplayConfig(path=path, start_mode="fixed")
+
+
+def _actions(replay: ReplayConfig, name: str, steps: int) -> np.ndarray:
+    env = CrowdNavEnv(CrowdNavConfig(scenario="replay", replay=replay, warmup_s=0.0, time_limit_s=20.0))
+    policy = make_policy(name, env)
+    env.reset(seed=0)
+    policy.reset(0)
+    env.robot_state[:3] = [0.0, 0.0, 0.0]
+    env.goal = np.array([9.0, 0.0])
+    out = []
+    for _ in range(steps):
+        action = act(policy, env)
+        out.append(action)
+        if any(env.step(action)[2:4]):
+            break
+    return np.array(out)
+
+
+def test_only_the_oracle_sees_the_recording_ahead(tmp_path):
+    """Rows of the recording after t = 3.2 s changed: every other policy acts identically before t; the oracle,
+    which sees 4.8 s ahead, does not."""
+    t_change, steps = 3.2, 32  # 32 env steps of 0.1 s: everything before t
+    original = _recording(tmp_path, "a.txt", None)
+    altered = _recording(tmp_path, "b.txt", t_change)
+    for name in POLICIES:
+        if name in ("mpc-oracle", "mpc-gpgraph"):
+            continue  # mpc-gpgraph: the same history path as mpc-cv, with a torch model (slow here)
+        np.testing.assert_array_equal(_actions(original, name, steps), _actions(altered, name, steps), err_msg=name)
+    oracle_a, oracle_b = _actions(original, "mpc-oracle", steps), _actions(altered, "mpc-oracle", steps)
+    assert not np.array_equal(oracle_a[: len(oracle_b)], oracle_b[: len(oracle_a)])
+
+
+def test_the_view_holds_the_future_only_for_a_policy_that_reads_it():
+    env = CrowdNavEnv(CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, robot_visible=False))
+    env.reset(seed=0)
+    readers = [n for n in POLICIES if getattr(make_policy(n, env), "reads_future", False)]
+    assert readers == ["mpc-oracle"]
+    assert env.view().future is None
+    oracle = make_policy("mpc-oracle", env)
+    oracle.reset(0)
+    decision = oracle.act(env.view(future=True))
+    assert decision.predictions.shape == (1, 12, 5, 2)  # one sample: the truth
+    assert np.isfinite(decision.predictions).all()
+    np.testing.assert_array_equal(decision.predicted_group_id, env.pedestrians().group_id)  # the true groups
+    with pytest.raises(ValueError, match="view"):
+        oracle.act(replace(env.view(), future=None))
