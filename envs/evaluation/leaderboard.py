@@ -15,6 +15,7 @@ import numpy as np
 
 from envs.atomic import write_json_atomic, write_text_atomic
 from envs.evaluation.records import EpisodeRecord
+from envs.evaluation.reference import REFERENCE_POLICY, against_reference, reference_table
 from envs.evaluation.report import fmt, pyplot, rate_errors, rate_text, save_figure
 from envs.evaluation.stats import aggregate, paired_comparison
 from envs.evaluation.suite import Cell, Suite
@@ -56,7 +57,21 @@ def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig],
         board["pooled"][pool] = {n: aggregate(rs) if rs else None for n, rs in pooled.items()}
         board["paired"][pool] = [paired_comparison(pooled[a], pooled[b]) for a, b in combinations(names, 2)
                                  if pooled[a] and pooled[b]]
+    if REFERENCE_POLICY in names:
+        board["reference"] = _reference(cells, names, by)
     return board
+
+
+def _reference(cells: list[Cell], names: list[str], by: dict[tuple[str, str], list[EpisodeRecord]]) -> dict[str, Any]:
+    """Each other policy against `REFERENCE_POLICY`, per cell and per pool (`envs.evaluation.reference`)."""
+    others = [n for n in names if n != REFERENCE_POLICY]
+
+    def compare(members: set[str]) -> dict[str, Any]:
+        ref = [r for c in members for r in by.get((c, REFERENCE_POLICY), [])]
+        return {n: against_reference([r for c in members for r in by.get((c, n), [])], ref) for n in others}
+
+    pooled = {pool: compare(members) for pool in POOLS if (members := _pool(cells, pool))}
+    return {"policy": REFERENCE_POLICY, "cells": {c.name: compare({c.name}) for c in cells}, "pooled": pooled}
 
 
 def _cell_rate(res: dict[str, Any] | None, key: str) -> str:
@@ -138,7 +153,7 @@ def leaderboard_markdown(board: dict[str, Any]) -> str:
     head = [f"## Leaderboard: suite {board['suite']} v{board['version']}", "", board["description"], ""]
     body = (_summary(board) + _matrix(board, "collision_rate", "Collision rate [95% Wilson CI]")
             + _matrix(board, "avoidable_collision_rate", "Avoidable collision rate (robot or pedestrian at fault)")
-            + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + _paired(board))
+            + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + reference_table(board) + _paired(board))
     return "\n".join(head + body)
 
 
