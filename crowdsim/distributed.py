@@ -160,8 +160,13 @@ class _Lane:
         self.pool = ProcessPoolExecutor(max_workers=width, mp_context=ctx, initializer=_init_worker,
                                         initargs=(self.queue,))
         self.futures: dict[Future, int] = {}
-        for i in indices:
-            self.futures[self.pool.submit(_call, fn, i, jobs[i])] = i
+        self.unsubmitted: list[int] = []  # jobs left out because a worker died while the pool was being filled
+        for k, i in enumerate(indices):
+            try:
+                self.futures[self.pool.submit(_call, fn, i, jobs[i])] = i
+            except BrokenProcessPool:  # an early job already killed its worker: the rest never started
+                self.unsubmitted = list(indices[k:])
+                break
         self.started: set[int] = set()
         self.unfinished: list[int] = []
         self.cause = ""
@@ -182,6 +187,7 @@ class _Lane:
         codes = [p.exitcode for p in processes if p.exitcode not in (0, None)]
         self.cause = describe_exit(([c for c in codes if c != -signal.SIGTERM] or codes or [None])[0])
         done = []
+        self.unfinished.extend(self.unsubmitted)  # not started: they simply run again
         for fut, i in self.futures.items():
             if fut in yielded:
                 continue

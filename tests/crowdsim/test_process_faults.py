@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 import pytest
 
@@ -127,3 +128,30 @@ def test_ray_backend_reruns_once_then_reports_worker_died(tmp_path):
     out = dict(run_on_ray(square_or_die, jobs, num_cpus=2))
     assert out.pop(1) == WorkerDied("Ray worker process died twice while running this task")
     assert out == {i: (i, i * i) for i in (0, 2, 3, 4)} and (tmp_path / "killed-3").exists()
+
+
+def test_a_worker_that_dies_while_the_pool_is_still_being_filled_loses_nothing(monkeypatch):
+    """The race in which the first job kills its worker before the later ones are even submitted: submit raises
+    BrokenProcessPool for them; they run again like any job that had not started."""
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    import crowdsim.distributed as distributed
+
+    class SlowToFill(ProcessPoolExecutor):
+        raced: ClassVar[list[bool]] = []
+
+        def submit(self, fn, /, *args, **kwargs):
+            if args[1] == 2 and not self.raced:  # in the first pool, job 2 waits until job 0 killed its worker
+                deadline = time.monotonic() + 30
+                while not self._broken and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                self.raced.append(bool(self._broken))
+            return super().submit(fn, *args, **kwargs)
+
+    monkeypatch.setattr(distributed, "ProcessPoolExecutor", SlowToFill)
+    jobs = [Job(0, kill="always"), *(Job(v) for v in range(1, 5))]
+    out = _run(jobs, workers=2)
+    assert SlowToFill.raced == [True]  # the race happened: submit found the pool broken
+    assert isinstance(out[0], WorkerDied)
+    assert {i: r for i, r in out.items() if i != 0} == {i: (i, i * i) for i in range(1, 5)}
