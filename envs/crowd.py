@@ -175,8 +175,14 @@ def rows_of(state: CrowdState, ped_ids: np.ndarray) -> np.ndarray:
     out = np.full((len(ped_ids), 2), np.nan)
     active = np.flatnonzero(state.active)
     order = np.argsort(state.ped_id[active], kind="stable")
-    known = state.ped_id[active][order]
+    at, found = match_ids(state.ped_id[active][order], ped_ids)
+    out[found] = state.pos[active[order[at]]]
+    return out
+
+
+def match_ids(known: np.ndarray, ped_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each of `ped_ids` (N,) stands in the ascending ids `known` (A,): (indices into `known` of those found,
+    found mask (N,))."""
     at = np.minimum(np.searchsorted(known, ped_ids), max(len(known) - 1, 0))
     found = (known[at] == ped_ids) if len(known) else np.zeros(len(ped_ids), bool)
-    out[found] = state.pos[active[order[at[found]]]]
-    return out
+    return at[found], found

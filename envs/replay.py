@@ -24,15 +24,17 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.state import CrowdState
+from envs.crowd import match_ids
 from predictor.ethucy import (  # the one ETH/UCY reader (torch-free)
     GROUP_OVERLAPS,
+    STEP_S,
     GroupFileWarning,
     read_groups,
     read_trajectories,
 )
 
 START_MODES = ("random", "fixed")
-DEFAULT_FRAME_STEP_S = 0.4  # the ETH/UCY format's annotation step (frame ids +10 per 0.4 s); crowdsim exports use it
+DEFAULT_FRAME_STEP_S = STEP_S  # the ETH/UCY format's annotation step (owned by predictor.ethucy)
 # Seconds per annotation step of the known recordings, by file stem (a `_train`/`_val` suffix of the benchmark's
 # split files is ignored). biwi_eth is the exception: its frame ids advance by 10 per ~0.667 s (the original
 # annotation steps 6 frames at 2.5 fps, the benchmark counts 10); the suites state the same values per cell.
@@ -328,9 +330,8 @@ class ReplayCrowd:
         out = np.full((len(times_s), len(ped_ids), 2), np.nan)
         for k, t in enumerate(np.asarray(times_s, float)):
             ids, pos, _ = self.positions_at(self.recording_time_s + t)
-            at = np.minimum(np.searchsorted(ids, ped_ids), max(len(ids) - 1, 0))
-            found = (ids[at] == ped_ids) if len(ids) else np.zeros(len(ped_ids), bool)
-            out[k, found] = pos[at[found]]
+            at, found = match_ids(ids, ped_ids)
+            out[k, found] = pos[at]
         return out
 
     # ----- state -----
