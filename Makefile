@@ -51,8 +51,8 @@ soak: setup
 # out/bench-v5 (2026-11-25: the 12-pedestrian MPC, the pairwise-assigner default predictor, arrivals back-filled in
 # the history). Not run in CI.
 benchmark: setup
-	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v5 \
-		--policy mpc-gpgraph mpc-cv mpc-none social-force ppo-crowdnav
+	$(VENV)/bin/crowdnav benchmark --suite crowdnav-v1 --out out/bench-v6 \
+		--policy mpc-gpgraph mpc-oracle mpc-oracle-paths mpc-oracle-groups mpc-cv mpc-none social-force ppo-crowdnav
 
 # Regenerate the crowdsim data and retrain, evaluate and repackage the default synthetic predictors
 # (gpgraph-stgcnn-synthetic, stgcnn-synthetic); about 1.5 h on the 2-core machine. Not run in CI. See RESULTS.md.

@@ -17,6 +17,7 @@ from typing import Any
 from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
+from planner import RouteConfig
 
 # flag -> the `PolicyConfig` field it sets
 FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-every": "replan_every_steps",
@@ -27,6 +28,8 @@ FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-e
 POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "mpc-gpgraph": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
     "mpc-oracle": ("--replan-every", "--mpc"),
+    "mpc-oracle-paths": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
+    "mpc-oracle-groups": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
     "mpc-cv": ("--replan-every", "--mpc"),
     "mpc-none": ("--replan-every", "--mpc"),
     "social-force": (),
@@ -98,17 +101,29 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
         key, sep, text = item.partition("=")
         if not sep or key not in valid:
             raise ValueError(f"--mpc {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(valid)}")
-        current = getattr(ENV_MPC, key)
-        try:
-            if isinstance(current, bool):
-                if text.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(text)
-                out[key] = text.lower() in ("true", "1")
-            else:
-                out[key] = type(current)(text)
-        except ValueError as exc:
-            raise ValueError(f"--mpc {item!r}: {text!r} is not a {type(current).__name__}") from exc
+        out[key] = _mpc_value(item, key, text, "None" in str(valid[key].type))
     return out
+
+
+def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
+    """The value of one --mpc FIELD=VALUE: a scalar of the field's type, `none` for an optional field, and for
+    `route` one of none (no global route) or default (`planner.RouteConfig()`)."""
+    if optional and text.lower() == "none":
+        return None
+    if key == "route":
+        if text.lower() != "default":
+            raise ValueError(f"--mpc {item!r}: route is one of none, default")
+        return RouteConfig()
+    current = getattr(ENV_MPC, key)
+    kind = float if current is None else type(current)
+    try:
+        if kind is bool:
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(text)
+            return text.lower() in ("true", "1")
+        return kind(text)
+    except ValueError as exc:
+        raise ValueError(f"--mpc {item!r}: {text!r} is not a {kind.__name__}") from exc
 
 
 def ignored_flag(flag: str, names: list[str], readers: list[str]) -> ValueError:

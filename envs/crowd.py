@@ -22,12 +22,16 @@ class Crowd(Protocol):
         walls: (W, 2, 2) static wall segments, m.
         bounds: (x_min, y_min, x_max, y_max) of the scene, m.
         dt_s: the time one `step()` advances, s.
+        group_labels: whether `CrowdState.group_id` holds ground-truth groups (a simulated crowd; a recording with a
+            group file). False: every pedestrian is its own group for want of labels, and group intrusion is not
+            measured (None, printed "n/a").
     """
 
     name: str
     walls: np.ndarray
     bounds: tuple[float, float, float, float]
     dt_s: float
+    group_labels: bool
 
     def reset(self, seed: int | None) -> CrowdState:
         """Start a new episode; the same seed gives the same crowd."""
@@ -51,6 +55,8 @@ class Crowd(Protocol):
 
 class SimCrowd:
     """`crowdsim.CrowdSimulator` stepped at the env's time step (`config.record_dt_s`)."""
+
+    group_labels = True  # crowdsim labels every pedestrian's group
 
     def __init__(self, config: SimConfig, route_margin_m: float = 1.5) -> None:
         self.sim = CrowdSimulator(config)

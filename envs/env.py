@@ -81,7 +81,7 @@ class CrowdNavEnv(gym.Env):
         self.goal = np.zeros(2)
         self.steps = 0
         self._sim_steps = 0
-        self.metrics = EpisodeMetrics()
+        self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels)
         self._done = True
         self._annotations: dict[str, np.ndarray | None] = {}
         self._pred_samples: np.ndarray | None = None
@@ -115,7 +115,7 @@ class CrowdNavEnv(gym.Env):
         if cfg.robot.model == "unicycle":
             self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
         self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
-        self.metrics = EpisodeMetrics()
+        self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels)
         self._spawns.reset()
         self._done = False
         self._annotations = {}

@@ -21,8 +21,9 @@ class EpisodeMetrics:
         "pedestrian" (walked into a stopped or retreating robot) or "spawn" (a track that began in contact);
         `envs.collisions`. "" without a collision.
     collision_time_s: time of the collision, s (NaN without one).
-    group_intrusion: whether the robot's body overlapped a ground-truth group's region on any step.
-    intrusion_fraction: fraction of steps with such an overlap.
+    group_intrusion: whether the robot's body overlapped a ground-truth group's region on any step; None when the
+        crowd has no group labels (`labelled` False: a recording without a group file).
+    intrusion_fraction: fraction of steps with such an overlap (None without labels).
     spawn_contacts: contacts of kind "spawn" that did not end the episode
         (`CrowdNavConfig.spawn_contact_ends_episode` False; `envs.collisions.SpawnContacts`).
     """
@@ -41,6 +42,7 @@ class EpisodeMetrics:
     discomfort_steps: int = 0
     intrusion_steps: int = 0
     spawn_contacts: int = 0
+    labelled: bool = True
 
     def update(self, dt_s: float, moved_m: float, min_surface_m: float, comfort_m: float, intruding: bool) -> None:
         self.steps += 1
@@ -55,18 +57,20 @@ class EpisodeMetrics:
         return self.discomfort_steps / self.steps if self.steps else 0.0
 
     @property
-    def intrusion_fraction(self) -> float:
+    def intrusion_fraction(self) -> float | None:
+        if not self.labelled:
+            return None
         return self.intrusion_steps / self.steps if self.steps else 0.0
 
     @property
-    def group_intrusion(self) -> bool:
-        return self.intrusion_steps > 0
+    def group_intrusion(self) -> bool | None:
+        return self.intrusion_steps > 0 if self.labelled else None
 
     @property
     def outcome(self) -> str:
         return "success" if self.success else "collision" if self.collision else "timeout" if self.timeout else ""
 
-    def as_dict(self) -> dict[str, float | bool | str | int]:
+    def as_dict(self) -> dict[str, float | bool | str | int | None]:
         return {
             "outcome": self.outcome, "success": self.success, "collision": self.collision,
             "collision_with": self.collision_with, "at_fault": self.at_fault,

@@ -183,6 +183,11 @@ class ReplayCrowd:
         robot: (pos (2,) m, vel (2,) m/s, radius m) last given by `set_robot`, or None; it moves nobody.
     """
 
+    @property
+    def group_labels(self) -> bool:
+        """True when the recording came with a group file (see `Crowd`)."""
+        return self.config.groups_path is not None
+
     def __init__(self, config: ReplayConfig) -> None:
         self.config = config
         self.name = config.name or config.path.stem

@@ -6,6 +6,7 @@ Units are in the field names: ``_m`` metres, ``_s`` seconds, ``_mps`` m/s, ``_mp
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 ROBOT_MODELS = ("unicycle", "holonomic")
@@ -75,6 +76,32 @@ class CostWeights:
 
 
 @dataclass(frozen=True)
+class RouteConfig:
+    """Settings of the global route (planner/route.py), in metres. The free space keeps the MPC's wall clearance
+    (`MPCConfig.wall_clearance_m`)."""
+
+    cell_m: float = 0.1  # grid resolution
+    comfort_m: float = 0.8  # steps nearer a wall than this cost more
+    clearance_weight: float = 2.0  # extra cost per metre of path at zero clearance (relative to 1)
+    lookahead_m: float = 2.0  # carrot distance along the path
+    replan_distance_m: float = 1.0  # search again when the robot is farther than this from the path
+    padding_m: float = 1.0  # grid margin around the walls, the robot and the goal
+    max_cells: int = 250_000  # a larger grid is refused (ValueError): coarsen cell_m instead
+
+    def __post_init__(self) -> None:
+        for name in ("cell_m", "comfort_m", "lookahead_m", "replan_distance_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"RouteConfig.{name} must be > 0 m, got {value!r}")
+        if not (math.isfinite(self.clearance_weight) and self.clearance_weight >= 0):
+            raise ValueError(f"RouteConfig.clearance_weight must be >= 0, got {self.clearance_weight!r}")
+        if not (math.isfinite(self.padding_m) and self.padding_m >= 0):
+            raise ValueError(f"RouteConfig.padding_m must be >= 0 m, got {self.padding_m!r}")
+        if self.max_cells < 4:
+            raise ValueError(f"RouteConfig.max_cells must be >= 4, got {self.max_cells!r}")
+
+
+@dataclass(frozen=True)
 class MPCConfig:
     """Sizes, timing and solver choice of the MPC. Sizes are fixed when the problem is built."""
 
@@ -89,6 +116,9 @@ class MPCConfig:
     max_group_span_m: float = 3.0  # a group predicted to spread wider than this is not treated as one region
     max_walls: int = 8  # obstacle segments constrained, nearest first
     safety_margin_m: float = 0.1  # added to robot radius + pedestrian radius
+    # added to the robot radius against walls, which are known exactly; None: safety_margin_m (before 2026-11-25
+    # the only margin: 0.3 m in CROWD_MPC left 0.6 m to each jamb, and a 1 m door could not be entered)
+    wall_margin_m: float | None = None
     check_midpoints: bool = False  # also check clearances half-way through each plan step (2x cost)
     comfort_distance_m: float = 1.0  # length scale of the social-comfort cost
     time_budget_s: float = 0.2  # wall-time budget of one solve; over it counts as a timeout
@@ -126,11 +156,21 @@ class MPCConfig:
     # violation per unit of normalised control change) for leaving that command, so that an evasive manoeuvre
     # is not swapped for its mirror image every 0.1 s; 0 = no commitment
     shield_hold_weight: float = 0.0
+    # -- global route (planner/route.py); None (default): head straight for the goal -------------------------
+    route: RouteConfig | None = None
+
+    @property
+    def wall_clearance_m(self) -> float:
+        """Distance (m) the robot's centre keeps from walls: robot radius + wall margin."""
+        margin = self.safety_margin_m if self.wall_margin_m is None else self.wall_margin_m
+        return self.robot.radius_m + margin
 
     def __post_init__(self) -> None:
         _check_name("solver", self.solver, SOLVERS)
         _check_positive(self, ("dt_s", "horizon_steps", "max_peds", "n_modes", "comfort_distance_m",
                                "max_group_span_m", "time_budget_s", "max_iter", "tolerance"))
+        if self.wall_margin_m is not None:
+            _check_non_negative(self, ("wall_margin_m",))
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         _check_name("pedestrian ranking", self.rank_peds_by, RANKINGS)

@@ -13,6 +13,7 @@ from planner.dynamics import brake_control, clip_control, model_dims, step_numpy
 from planner.ocp import OCP, build_ocp, pack_params
 from planner.prediction import PedPrediction, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
+from planner.route import Router
 from planner.scene import build_scene, validate_obstacles
 from planner.shield import shield_control
 
@@ -74,11 +75,15 @@ class MPCPlanner:
         self.stats = PlanStats()
         self._plan: _Plan | None = None
         self._shielded: np.ndarray | None = None  # the command the shield applied last step, if it replaced one
+        self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
 
     def reset(self) -> None:
-        """Forget the stored plan (warm start and fallback) and the shield's last command; keep the stats."""
+        """Forget the stored plan (warm start and fallback), the shield's last command and the route; keep the
+        stats."""
         self._plan = None
         self._shielded = None
+        if self.router is not None:
+            self.router.reset()
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
              obstacles: np.ndarray | list | None = None) -> PlanResult:
@@ -91,14 +96,25 @@ class MPCPlanner:
         if self._plan is not None:
             shifted = self._shift(self._plan)
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
+        routed = time.perf_counter()
         try:
-            result = self._solve(state, goal, prediction, obstacles)
+            subgoal = self._subgoal(state, goal, obstacles)
+            routed = time.perf_counter() - routed
+            result = self._solve(state, subgoal, prediction, obstacles)
+            result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
         except Exception as exc:  # never raise inside the control loop
             result = self._fallback(state, "solver_error", f"{type(exc).__name__}: {exc}", 0.0, 0, np.inf)
         if self.config.shield_horizon_s > 0:
             result = self._shield(result, state, prediction, obstacles)
         self.stats.record(result)
         return result
+
+    def _subgoal(self, state: np.ndarray, goal: np.ndarray, obstacles: np.ndarray | None) -> np.ndarray:
+        """The point the solve heads for: the goal, or with a route (``config.route``) and walls, the route's
+        subgoal (planner/route.py)."""
+        if self.router is None or obstacles is None or len(obstacles) == 0:
+            return goal
+        return self.router.subgoal(state[:2], goal, obstacles)
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:
         """``result`` with its first control checked by the safety shield (planner/shield.py); the shield's

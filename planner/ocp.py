@@ -21,7 +21,7 @@ f(z_k, u_k, dt/2), which stays local to stage k and catches fast head-on passes 
 
 * pedestrian m, mode j: ``mask_m (d(p, q_mj(t)) - clear_m(t)) + s_km >= 0`` (clear_m(t) may grow with t);
 * group g, mode j: ``mask_g (d(p, capsule segment_gj(t)) - clear_gj(t)) + s_kg >= 0``;
-* wall w: ``mask_w (d(p, segment_w) - (radius + margin)) + s_k,wall >= 0``.
+* wall w: ``mask_w (d(p, segment_w) - (radius + wall margin)) + s_k,wall >= 0``.
 
 Hard constraints: z_0 equals the measured state, velocity and acceleration bounds, and (only when
 ``speed_cap_gain_per_s`` is finite) the per-stage speed cap ``v_k <= v_cap_k`` (unicycle) or
@@ -225,7 +225,7 @@ def _collision_terms(b: _Builder, k: int) -> None:
                  for pos, t in points for j in range(sz.k)]
         _soft(b, k, exprs, s[sz.m + gi], need)
     if sz.w:
-        clear = cfg.robot.radius_m + cfg.safety_margin_m
+        clear = cfg.wall_clearance_m
         exprs = [par["wall_mask"][i] * (_seg_dist(pos, par["walls"][i, :2], par["walls"][i, 2:]) - clear)
                  for pos, _ in points for i in range(sz.w)]
         _soft(b, k, exprs, s[sz.ns - 1], need)

@@ -20,14 +20,16 @@ class PlanResult:
     states: (H+1, state_dim) planned states, row 0 = the measured state.
     controls: (H, 2) planned controls.
     status: one of ``STATUSES``; solver_status: the solver's own return status string.
-    solve_time_s: wall time of the solver call, plus the safety shield's check when it is on (0 for reactive
-    controllers).
+    solve_time_s: wall time of the solver call, plus the route's subgoal and the safety shield's check when on
+    (0 for reactive controllers).
     iterations: solver iterations (0 when no solver ran).
     max_slack_m: largest violation of a soft clearance constraint by the planned states, m (for a start
     in collision, how deep the robot overlaps).
     fallback: None, or how the control was made instead (``"previous_plan"`` or ``"brake"``).
     shield_risk: the fraction of predicted samples the plan's first control came too close to (0 without a
     shield); shielded: True when the safety shield replaced that control (``planner/shield.py``).
+    subgoal: the point (2,) m the solve headed for: the goal, or the global route's subgoal (``planner/route.py``);
+    None when no solve ran.
     """
 
     control: np.ndarray
@@ -41,6 +43,7 @@ class PlanResult:
     fallback: str | None = None
     shield_risk: float = 0.0
     shielded: bool = False
+    subgoal: np.ndarray | None = None
 
     @property
     def fallback_used(self) -> bool:

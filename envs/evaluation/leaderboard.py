@@ -16,7 +16,7 @@ import numpy as np
 from envs.atomic import write_json_atomic, write_text_atomic
 from envs.evaluation.records import EpisodeRecord
 from envs.evaluation.reference import REFERENCE_POLICY, against_reference, reference_table
-from envs.evaluation.report import fmt, pyplot, rate_errors, rate_text, save_figure
+from envs.evaluation.report import fmt, intrusion_text, pyplot, rate_errors, rate_text, save_figure
 from envs.evaluation.stats import aggregate, paired_comparison
 from envs.evaluation.suite import Cell, Suite
 from envs.policies import PolicyConfig
@@ -102,7 +102,8 @@ def _summary(board: dict[str, Any]) -> list[str]:
                 f"{_cell_rate(r, 'collision_rate')} | {_cell_rate(r, 'avoidable_collision_rate')} | "
                 f"{r['collisions_at_fault_robot']}/{r['collisions_at_fault_pedestrian']}/{r['collisions_at_fault_spawn']}"
                 f"{' (+' + str(r['spawn_contacts']) + ')' if r.get('spawn_contacts') else ''} | "
-                f"{fmt(r['timeout_rate'])} | {fmt(r['group_intrusion_rate'])} | {fmt(r['time_to_goal_s'])} | "
+                f"{fmt(r['timeout_rate'])} | {intrusion_text(r, 'group_intrusion_rate')} | "
+                f"{fmt(r['time_to_goal_s'])} | "
                 f"{fmt(r['solve_time_p50_ms'], 1)}/{fmt(r['solve_time_p95_ms'], 1)} |")
     return [*lines, ""]
 

@@ -44,7 +44,8 @@ class EpisodeRecord:
     or None (written as `collision_kind` before; such records still load, `RENAMED_FIELDS`).
     collision_time_s: time of the (first, episode-ending) collision. spawn_contacts: contacts of kind "spawn" that
     did not end the episode (`CrowdNavConfig.spawn_contact_ends_episode`). plans/fallbacks: planner calls and
-    fallbacks; solve_times_ms: every solver call's wall time. fingerprint: identifies the settings the episode
+    fallbacks; solve_times_ms: every solver call's wall time. group_intrusion / intrusion_fraction: None where the
+    crowd had no group labels (`envs.crowd.Crowd.group_labels`). fingerprint: identifies the settings the episode
     ran under (suite, cell, policy); records merge only when it agrees.
     """
 
@@ -61,8 +62,8 @@ class EpisodeRecord:
     path_length_m: float = 0.0
     min_distance_m: float | None = None
     discomfort_frequency: float = 0.0
-    group_intrusion: bool = False
-    intrusion_fraction: float = 0.0
+    group_intrusion: bool | None = False
+    intrusion_fraction: float | None = 0.0
     spawn_contacts: int = 0
     plans: int = 0
     fallbacks: int = 0

@@ -29,7 +29,16 @@ def fmt(value: Any, digits: int = 2) -> str:
     return str(value)
 
 
+def intrusion_text(result: dict[str, Any], key: str) -> str:
+    """A group intrusion rate (no interval); "n/a" where no episode had group labels (a recording without a group
+    file: intrusion was not measured, which is not a rate of 0)."""
+    return "n/a" if result.get("labelled") == 0 else fmt(result[key])
+
+
 def rate_text(result: dict[str, Any], key: str) -> str:
+    """A rate with its 95% interval (group intrusion: "n/a" without labels, see `intrusion_text`)."""
+    if key.startswith("group_intrusion") and result.get("labelled") == 0:
+        return "n/a"
     ci = result.get(f"{key}_ci95")
     text = fmt(result[key])
     return f"{text} [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else text
@@ -59,8 +68,8 @@ def markdown_table(result: dict[str, Any]) -> str:
         ("time to first collision, mean (s)", fmt(result["time_to_first_collision_s"])),
         ("errors", str(result["errors"])),
         ("timeout rate", fmt(result["timeout_rate"])),
-        ("group intrusion rate (all episodes)", fmt(result["group_intrusion_rate"])),
-        ("group intrusion rate (successes)", fmt(result["group_intrusion_rate_success"])),
+        ("group intrusion rate (all episodes)", intrusion_text(result, "group_intrusion_rate")),
+        ("group intrusion rate (successes)", intrusion_text(result, "group_intrusion_rate_success")),
         ("time to goal, mean / median (s)",
          f"{fmt(result['time_to_goal_s'])} / {fmt(result['time_to_goal_median_s'])}"),
         ("path length (m)", fmt(result["path_length_m"])),
@@ -82,8 +91,8 @@ COMPARE_COLUMNS = (
     ("avoidable coll.", lambda r: fmt(r["avoidable_collision_rate"])),
     ("errors", lambda r: str(r["errors"])),
     ("timeout", lambda r: fmt(r["timeout_rate"])),
-    ("intrusion", lambda r: fmt(r["group_intrusion_rate"])),
-    ("intrusion (succ.)", lambda r: fmt(r["group_intrusion_rate_success"])),
+    ("intrusion", lambda r: intrusion_text(r, "group_intrusion_rate")),
+    ("intrusion (succ.)", lambda r: intrusion_text(r, "group_intrusion_rate_success")),
     ("time to goal (s)", lambda r: fmt(r["time_to_goal_s"])),
     ("path (m)", lambda r: fmt(r["path_length_m"])),
     ("min dist (m)", lambda r: fmt(r["min_distance_m"])),

@@ -78,8 +78,9 @@ def _rate(out: dict[str, Any], key: str, k: int, n: int) -> None:
 def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     """The summary of one policy's episodes (JSON-ready).
 
-    Rates (with 95% Wilson intervals) are over completed episodes; `group_intrusion_rate_success` over
-    successful ones. Collisions split by who was at fault (`collisions_at_fault_<robot|pedestrian|spawn>`);
+    Rates (with 95% Wilson intervals) are over completed episodes; the group intrusion rates only over those with
+    group labels (`labelled` of them; None without any), `group_intrusion_rate_success` over the successful ones.
+    Collisions split by who was at fault (`collisions_at_fault_<robot|pedestrian|spawn>`);
     `avoidable_collision_rate` counts robot and pedestrian faults, not tracks that began in contact;
     `spawn_contacts` counts the spawn contacts that did not end their episode
     (`CrowdNavConfig.spawn_contact_ends_episode` False). Time to goal and path length are over successes;
@@ -99,8 +100,12 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     for o in ("success", "collision", "timeout"):
         _rate(out, f"{o}_rate", count[o], n)
     _rate(out, "avoidable_collision_rate", sum(r.avoidable_collision for r in done), n)
-    _rate(out, "group_intrusion_rate", sum(r.group_intrusion for r in done), n)
-    out["group_intrusion_rate_success"] = (sum(r.group_intrusion for r in succ) / len(succ)) if succ else None
+    labelled = [r for r in done if r.group_intrusion is not None]
+    out["labelled"] = len(labelled)
+    _rate(out, "group_intrusion_rate", sum(r.group_intrusion for r in labelled), len(labelled))
+    succ_labelled = [r for r in succ if r.group_intrusion is not None]
+    out["group_intrusion_rate_success"] = (sum(r.group_intrusion for r in succ_labelled) / len(succ_labelled)
+                                           if succ_labelled else None)
     out["collisions"] = len(coll)
     for who in AT_FAULT:
         out[f"collisions_at_fault_{who}"] = sum(r.at_fault == who for r in coll)
@@ -130,15 +135,21 @@ PAIRED_EVENTS: dict[str, Callable[[EpisodeRecord], bool]] = {
     "success": lambda r: r.outcome == "success",
     "collision": lambda r: r.outcome == "collision",
     "avoidable_collision": lambda r: r.avoidable_collision,
-    "group_intrusion": lambda r: r.group_intrusion,
+    "group_intrusion": lambda r: bool(r.group_intrusion),
 }
+
+
+def both_labelled(a: EpisodeRecord, b: EpisodeRecord) -> bool:
+    """Whether both episodes of a pair measured group intrusion (their crowd had group labels)."""
+    return a.group_intrusion is not None and b.group_intrusion is not None
 
 
 def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], alpha: float = ALPHA,
                       seed: int = 0) -> dict[str, Any]:
     """Policy a against policy b on the episodes both completed (matched by cell and seed).
 
-    For each binary event (success, collision, avoidable collision, group intrusion): counts, the discordant
+    For each binary event (success, collision, avoidable collision, group intrusion, the last only on pairs where
+    both episodes had group labels; `pairs` says how many): counts, the discordant
     pairs (a only, b only), the exact McNemar p-value, `tested` (at least `min_discordant_pairs(alpha)` discordant
     pairs) and `significant` (tested and p < alpha). For the path length of episodes both succeeded, and for the
     smallest robot-pedestrian surface distance of episodes where both met somebody (`min_distance_m`: a graded
@@ -153,11 +164,12 @@ def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], al
                            "pairs": len(pairs), "alpha": alpha, "test": "exact McNemar (two-sided)",
                            "min_discordant_pairs": min_discordant, "min_bootstrap_pairs": MIN_BOOTSTRAP_PAIRS}
     for name, event in PAIRED_EVENTS.items():
-        only_a = sum(event(x) and not event(y) for x, y in pairs)
-        only_b = sum(event(y) and not event(x) for x, y in pairs)
+        on = [(x, y) for x, y in pairs if name != "group_intrusion" or both_labelled(x, y)]
+        only_a = sum(event(x) and not event(y) for x, y in on)
+        only_b = sum(event(y) and not event(x) for x, y in on)
         p = mcnemar_exact(only_a, only_b)
         tested = only_a + only_b >= min_discordant
-        out[name] = {"a": sum(event(x) for x, _ in pairs), "b": sum(event(y) for _, y in pairs),
+        out[name] = {"pairs": len(on), "a": sum(event(x) for x, _ in on), "b": sum(event(y) for _, y in on),
                      "a_only": only_a, "b_only": only_b, "p_value": p, "tested": tested,
                      "significant": tested and p < alpha}
     graded = {"path_length_m": [(x.path_length_m, y.path_length_m) for x, y in pairs

@@ -3,11 +3,15 @@
 A suite file `envs/evaluation/suites/<name>.json` holds {"name", "version", "description", "defaults", "cells": [...]}.
 A cell is either simulated ({"name", "scenario", "n_pedestrians", "robot_visible", "options"?, "episodes",
 "seed0"}) or a real-crowd replay ({"name", "replay": [files relative to the data folder], "frame_step_s",
-"episodes", "seed0"}). Any cell may name its `scene` (default: "synthetic" for simulated cells) and the
-`predictor` that `mpc-gpgraph` uses there when none is given (real cells: the scene's leave-one-out ETH/UCY
-checkpoint, trained without that scene). Episode i of a cell has seed seed0 + i; a replay cell with several
-files replays file (seed mod number of files) from a start time drawn from the seed. `defaults` are
-`CrowdNavConfig` fields (time limit, ...) applied to every cell. Every policy meets exactly the same episodes.
+"episodes", "seed0", "groups"?, "group_overlaps"?}). `groups` maps a replayed file to its group file (both
+relative to the data folder, e.g. "../eth_ucy_groups/students003.groups.txt"); `group_overlaps` says what a
+pedestrian listed in two groups does ("merge", or the default "error"; `envs.replay.ReplayConfig`). A recording
+without a group file has no group labels: its group intrusion is "n/a". Any cell may name its `scene` (default:
+"synthetic" for simulated cells) and the `predictor` that `mpc-gpgraph` uses there when none is given (real cells:
+the scene's leave-one-out ETH/UCY checkpoint, trained without that scene). Episode i of a cell has seed seed0 + i;
+a replay cell with several files replays file (seed mod number of files) from a start time drawn from the seed.
+`defaults` are `CrowdNavConfig` fields (time limit, ...) applied to every cell. Every policy meets exactly the same
+episodes.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from predictor.ethucy import DEFAULT_DATA_DIR
 
 DEFAULT_DATA = DEFAULT_DATA_DIR  # predictor.ethucy owns the ETH/UCY data path (ETH_UCY_DIR overrides it)
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
-              "episodes", "seed0", "note", "scene", "predictor"}
+              "episodes", "seed0", "note", "scene", "predictor", "groups", "group_overlaps"}
 SIMULATED_SCENE = "synthetic"
 _DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m", "spawn_contact_ends_episode"}
 
@@ -60,6 +64,10 @@ class Cell:
     def files(self, data: Path) -> list[Path]:
         return [Path(data) / f for f in self.spec["replay"]]
 
+    def group_files(self, data: Path) -> dict[Path, Path]:
+        """Replayed file -> its group file, for the recordings that have one."""
+        return {Path(data) / f: Path(data) / g for f, g in self.spec.get("groups", {}).items()}
+
     def env_config(self, seed: int, data: Path = DEFAULT_DATA) -> CrowdNavConfig:
         """The env config of this cell's episode `seed` (for replay: the file it replays)."""
         kw: dict[str, Any] = dict(self.defaults)
@@ -68,8 +76,11 @@ class Cell:
 
             files = self.files(data)
             limit = float(kw.get("time_limit_s", CrowdNavConfig.time_limit_s))
-            kw["replay"] = ReplayConfig(path=files[seed % len(files)], frame_step_s=float(self.spec["frame_step_s"]),
-                                        min_remaining_s=limit, name=self.name)
+            groups = self.group_files(data)
+            path = files[seed % len(files)]
+            kw["replay"] = ReplayConfig(path=path, frame_step_s=float(self.spec["frame_step_s"]),
+                                        min_remaining_s=limit, name=self.name, groups_path=groups.get(path),
+                                        group_overlaps=str(self.spec.get("group_overlaps", "error")))
             return CrowdNavConfig(scenario=REPLAY_SCENARIO, **kw)
         n = int(self.spec["n_pedestrians"])
         return CrowdNavConfig(scenario=self.spec["scenario"], n_pedestrians=n,
@@ -107,6 +118,10 @@ class Suite:
                     if not f.is_file():
                         raise ValueError(f"cell {c.name}: recording {f} not found; point --data at the ETH/UCY "
                                          "folder (with eth/, hotel/, ... inside) or choose --cells")
+                for g in c.group_files(data).values():
+                    if not g.is_file():
+                        raise ValueError(f"cell {c.name}: group file {g} not found (group files are named relative "
+                                         "to the --data folder) or choose --cells")
 
 
 def _check_cell(c: dict[str, Any], where: str) -> None:
@@ -120,6 +135,11 @@ def _check_cell(c: dict[str, Any], where: str) -> None:
         raise ValueError(f"{where}: missing key(s) {sorted(missing)}")
     if int(c["episodes"]) < 1 or int(c["seed0"]) < 0:
         raise ValueError(f"{where}: episodes must be >= 1 and seed0 >= 0")
+    stray = set(c.get("groups", {})) - set(c.get("replay", []))
+    if stray:
+        raise ValueError(f"{where}: groups name file(s) the cell does not replay: {sorted(stray)}")
+    if c.get("group_overlaps", "error") not in ("error", "merge"):
+        raise ValueError(f"{where}: group_overlaps must be error or merge, got {c['group_overlaps']!r}")
 
 
 def parse_suite(data: dict[str, Any], origin: str = "suite") -> Suite:

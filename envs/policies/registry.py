@@ -4,7 +4,10 @@ Registry names:
 
     mpc-gpgraph   MPC + a GP-Graph predictor (default the shipped synthetic one): K samples, its own groups
     mpc-oracle    the same MPC fed the pedestrians' true future and true groups: the prediction upper bound (a
-                  reference; it alone reads the privileged `view.future`)
+                  reference; it and mpc-oracle-paths alone read the privileged `view.future`)
+    mpc-oracle-paths   the two halves between mpc-gpgraph and mpc-oracle, which separate trajectory error from
+    mpc-oracle-groups  grouping error: true futures with the predictor's groups; the predictor's samples with the
+                  true groups (where a crowd has no group labels, every pedestrian alone)
     mpc-cv        MPC + constant-velocity prediction, every pedestrian its own group
     mpc-none      MPC with pedestrians frozen where they stand (no prediction), no groups
     social-force  reactive social-force robot (every env step)
@@ -55,7 +58,8 @@ from planner import (
 # docs/decisions/replanning.md.
 ENV_MPC = CROWD_MPC
 REPLAN_EVERY_STEPS = 1
-PREDICTOR_POLICIES = ("mpc-gpgraph",)  # registry policies that take `PolicyConfig.predictor`
+# registry policies that take `PolicyConfig.predictor`
+PREDICTOR_POLICIES = ("mpc-gpgraph", "mpc-oracle-paths", "mpc-oracle-groups")
 SCENE_TEMPLATE = "{scene}"  # in a predictor name: filled in per benchmark cell (`PolicyConfig.for_cell`)
 
 
@@ -226,6 +230,31 @@ class OraclePolicy(PlannerPolicy):
         super().__init__("mpc-oracle", MPCPlanner(config), oracle_prediction, replan_every_steps)
 
 
+class HalfOraclePolicy(GPGraphPolicy):
+    """`mpc-oracle-paths` (half "paths": the true future as one sample, with the predictor's groups) and
+    `mpc-oracle-groups` (half "groups": the predictor's samples, with the true groups): mpc-gpgraph with one of its two
+    outputs replaced by the truth, so that the gap to mpc-oracle splits into trajectory and grouping error."""
+
+    HALVES = ("paths", "groups")
+
+    def __init__(self, half: str, config: MPCConfig, predictor: str | None = DEFAULT_PREDICTOR, n_samples: int = 20,
+                 threads: int = 1, replan_every_steps: int = REPLAN_EVERY_STEPS,
+                 env_timing: PredictionTiming | None = None) -> None:
+        if half not in self.HALVES:
+            raise ValueError(f"unknown half {half!r}; valid: {', '.join(self.HALVES)}")
+        super().__init__(config, predictor, n_samples, threads, replan_every_steps, env_timing)
+        self.half, self.name, self.reads_future = half, f"mpc-oracle-{half}", half == "paths"
+        self._predict = self._half_truth
+
+    def _half_truth(self, view: PolicyView) -> PedPrediction:
+        predicted = self._gpgraph(view)
+        if not predicted.n_peds:
+            return predicted
+        if self.half == "groups":
+            return replace(predicted, group_ids=np.asarray(view.pedestrians.group_id))
+        return replace(oracle_prediction(view), group_ids=predicted.group_ids)
+
+
 def singleton_prediction(view: PolicyView) -> PedPrediction:
     """The observed history as a (placeholder) prediction with every pedestrian its own group; the
     baseline planners replace the positions (constant velocity, frozen)."""
@@ -280,6 +309,10 @@ POLICIES: dict[str, Factory] = {
     "mpc-gpgraph": lambda cfg, mpc, env: GPGraphPolicy(mpc, cfg.predictor, cfg.n_samples, cfg.threads,
                                                        cfg.replan_every_steps, env.timing),
     "mpc-oracle": lambda cfg, mpc, env: OraclePolicy(mpc, cfg.replan_every_steps),
+    "mpc-oracle-paths": lambda cfg, mpc, env: HalfOraclePolicy("paths", mpc, cfg.predictor, cfg.n_samples, cfg.threads,
+                                                               cfg.replan_every_steps, env.timing),
+    "mpc-oracle-groups": lambda cfg, mpc, env: HalfOraclePolicy("groups", mpc, cfg.predictor, cfg.n_samples,
+                                                                cfg.threads, cfg.replan_every_steps, env.timing),
     "mpc-cv": _planner("mpc-cv"),
     "mpc-none": _planner("mpc-none"),
     "social-force": _planner("social-force", every=1),

@@ -242,13 +242,13 @@ def test_cli_benchmark_runs_a_suite_and_resumes(tmp_path, capsys):
             "--out", str(tmp_path), "--workers", "1", "--no-progress"]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "Leaderboard: suite smoke v5" in out and "| corridor-low-visible |" in out
+    assert "Leaderboard: suite smoke v6" in out and "| corridor-low-visible |" in out
     assert "2 episodes run, 0 already recorded" in out
     assert len(read_records(tmp_path / RECORDS)) == 2
     assert main(args) == 0
     assert "0 episodes run, 2 already recorded" in capsys.readouterr().out
     assert main(["suites"]) == 0
-    assert "crowdnav-v1 v5: " in capsys.readouterr().out
+    assert "crowdnav-v1 v6: " in capsys.readouterr().out
 
 
 def test_real_cells_give_mpc_gpgraph_the_scenes_leave_one_out_predictor(tmp_path):

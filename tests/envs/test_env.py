@@ -192,7 +192,7 @@ def test_collision_terminates_along_the_step(tmp_path):
 
 def test_group_intrusion_needs_a_group(tmp_path):
     peds = {1: (3.0, -1.0), 2: (3.0, 1.0), 3: (20.0, 20.0)}
-    for groups, expect in (([[1, 2]], True), (None, False)):
+    for groups, expect in (([[1, 2]], True), ([[3]], False), (None, None)):  # None: no labels, not measured
         env = CrowdNavEnv(scenario="replay", replay=write_replay(tmp_path, peds, groups=groups))
         env.reset(seed=0)
         place_robot(env, (0.0, 0.0), (6.0, 0.0))
@@ -200,7 +200,7 @@ def test_group_intrusion_needs_a_group(tmp_path):
         m = infos[-1]["episode_metrics"]
         assert m["success"]  # passes between the two without contact...
         assert m["group_intrusion"] is expect  # ...which intrudes only if they are a group
-        assert (sum(i["reward_terms"]["group_intrusion"] for i in infos) < 0) is expect
+        assert (sum(i["reward_terms"]["group_intrusion"] for i in infos) < 0) is bool(expect)
 
 
 def test_time_limit_truncates():

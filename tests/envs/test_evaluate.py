@@ -181,6 +181,9 @@ TINY = ["--episodes", "1", "--workers", "1", "--record", "0", "--no-progress", "
     (["--policy", "mpc-cv", "--mpc", "safety_margin=0.5"], "FIELD one of"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=wide"], "not a float"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=-1"], "safety_margin_m"),
+    (["--policy", "mpc-cv", "--mpc", "route=shortest"], "route is one of none, default"),
+    (["--policy", "mpc-cv", "--mpc", "wall_margin_m=-0.1"], "wall_margin_m"),
+    (["--policy", "mpc-cv", "--mpc", "safety_margin_m=none"], "not a float"),  # not optional
     (["--policy", "mpc-cv", "mpc-cv"], "named twice"),
     (["--policy", "mpc-gpgraph", "--samples", "0"], "n_samples"),
     (["--policy", "random", "--address", "auto"], "--address needs --backend ray"),
@@ -215,6 +218,22 @@ def test_policy_flags_reach_the_results_json(tmp_path):
     assert saved["policy_config"]["mpc"]["safety_margin_m"] == 0.45
     assert saved["policy_config"]["mpc"]["shield_horizon_s"] == 1.6  # the env's MPC, not the planner default
     assert saved["policy_config"]["replan_every_steps"] == 2
+
+
+def test_optional_mpc_fields_take_none_and_the_route_takes_none_or_default():
+    from envs.cli import build_parser
+    from envs.cli_options import policy_configs
+    from planner import RouteConfig
+
+    args = build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "wall_margin_m=none",
+                                      "--mpc", "route=none"])
+    (cv,) = policy_configs(args)
+    assert cv.mpc.wall_margin_m is None and cv.mpc.route is None
+    assert cv.mpc.wall_clearance_m == cv.mpc.robot.radius_m + cv.mpc.safety_margin_m  # the margin before 2026-11-25
+    args = build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "wall_margin_m=0.1",
+                                      "--mpc", "route=default"])
+    (cv,) = policy_configs(args)
+    assert cv.mpc.wall_margin_m == 0.1 and cv.mpc.route == RouteConfig()
 
 
 def test_every_registry_policy_states_the_flags_it_reads():

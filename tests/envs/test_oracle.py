@@ -76,18 +76,19 @@ def test_only_the_oracle_sees_the_recording_ahead(tmp_path):
     original = _recording(tmp_path, "a.txt", None)
     altered = _recording(tmp_path, "b.txt", t_change)
     for name in POLICIES:
-        if name in ("mpc-oracle", "mpc-gpgraph"):
-            continue  # mpc-gpgraph: the same history path as mpc-cv, with a torch model (slow here)
+        if name in ("mpc-oracle", "mpc-oracle-paths", "mpc-gpgraph"):
+            continue  # mpc-gpgraph: the history path of mpc-oracle-groups, which is checked, without the true groups
         np.testing.assert_array_equal(_actions(original, name, steps), _actions(altered, name, steps), err_msg=name)
-    oracle_a, oracle_b = _actions(original, "mpc-oracle", steps), _actions(altered, "mpc-oracle", steps)
-    assert not np.array_equal(oracle_a[: len(oracle_b)], oracle_b[: len(oracle_a)])
+    for name in ("mpc-oracle", "mpc-oracle-paths"):
+        oracle_a, oracle_b = _actions(original, name, steps), _actions(altered, name, steps)
+        assert not np.array_equal(oracle_a[: len(oracle_b)], oracle_b[: len(oracle_a)]), name
 
 
 def test_the_view_holds_the_future_only_for_a_policy_that_reads_it():
     env = CrowdNavEnv(CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, robot_visible=False))
     env.reset(seed=0)
     readers = [n for n in POLICIES if getattr(make_policy(n, env), "reads_future", False)]
-    assert readers == ["mpc-oracle"]
+    assert readers == ["mpc-oracle", "mpc-oracle-paths"]
     assert env.view().future is None
     oracle = make_policy("mpc-oracle", env)
     oracle.reset(0)
@@ -97,3 +98,25 @@ def test_the_view_holds_the_future_only_for_a_policy_that_reads_it():
     np.testing.assert_array_equal(decision.predicted_group_id, env.pedestrians().group_id)  # the true groups
     with pytest.raises(ValueError, match="view"):
         oracle.act(replace(env.view(), future=None))
+
+
+def test_the_halves_take_one_output_each_from_the_truth():
+    """mpc-oracle-paths: the true future with mpc-gpgraph's groups; mpc-oracle-groups: mpc-gpgraph's samples (same
+    seed, same draws) with the true groups."""
+    from envs.policies.registry import oracle_prediction
+
+    env = CrowdNavEnv(CrowdNavConfig(scenario="circle_crossing", n_pedestrians=6, robot_visible=False))
+    env.reset(seed=3)
+    for _ in range(10):
+        env.step(np.zeros(2, np.float32))
+    view = env.view(history=True, future=True)
+    paths, groups, gpgraph = (make_policy(n, env) for n in ("mpc-oracle-paths", "mpc-oracle-groups", "mpc-gpgraph"))
+    for policy in (paths, groups, gpgraph):
+        policy.reset(0)
+    truth, predicted = oracle_prediction(view), gpgraph._predict(view)
+    half_paths, half_groups = paths._predict(view), groups._predict(view)
+    np.testing.assert_array_equal(half_paths.positions, truth.positions)
+    np.testing.assert_array_equal(half_paths.group_ids, predicted.group_ids)
+    np.testing.assert_array_equal(half_groups.positions, predicted.positions)
+    np.testing.assert_array_equal(half_groups.group_ids, view.pedestrians.group_id)
+    assert len(np.unique(view.pedestrians.group_id)) < len(view.pedestrians.group_id)  # real groups in this crowd

@@ -347,3 +347,21 @@ def test_a_group_file_listing_somebody_twice_is_refused_or_merged_and_said_once(
     assert main([*base, "--group-overlaps", "merge", "--out", str(tmp_path / "merged")]) == 0
     assert capsys.readouterr().err.splitlines() == [f"crowdnav: warning: {crowd.group_notes[0]}"]
     assert main(["evaluate", "--policy", "random", "--group-overlaps", "merge", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_group_intrusion_is_measured_only_with_a_group_file(tmp_path):
+    """A recording without a group file has no labels: the crowd says so and the episode's group intrusion is None
+    (printed n/a); with the file it is a measurement (a bool)."""
+    from envs import CrowdNavConfig
+    from envs.evaluation.episode import episode_record, run_episode
+    from envs.policies import PolicyConfig
+
+    text = "".join(f"{10 * f}\t{p}\t{p + 0.1 * f}\t{0.5 * p}\n" for f in range(200) for p in (1, 2, 3))
+    rec, groups = _write(tmp_path, text), _write(tmp_path, "1 2\n", "g.txt")
+    for groups_path, labelled in ((None, False), (groups, True)):
+        replay = ReplayConfig(path=rec, groups_path=groups_path, start_mode="fixed")
+        assert ReplayCrowd(replay).group_labels is labelled
+        env = CrowdNavConfig(scenario="replay", replay=replay, time_limit_s=2.0, warmup_s=0.0)
+        record = episode_record(run_episode(env, PolicyConfig("random"), seed=0), "random", 0)
+        assert (record.group_intrusion is not None) is labelled
+        assert (record.intrusion_fraction is not None) is labelled

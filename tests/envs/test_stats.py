@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,7 +22,8 @@ def _rec(seed, outcome, ttg=None, path=10.0, mind=0.5, disc=0.0, intr=False, pla
                          collision_with="pedestrian" if outcome == "collision" else None, at_fault=kind,
                          collision_time_s=coll_t, steps=100, time_s=10.0, time_to_goal_s=ttg, path_length_m=path,
                          min_distance_m=mind, discomfort_frequency=disc, group_intrusion=intr,
-                         intrusion_fraction=0.1 * intr, plans=plans, fallbacks=fallbacks, ret=1.0,
+                         intrusion_fraction=None if intr is None else 0.1 * intr, plans=plans, fallbacks=fallbacks,
+                         ret=1.0,
                          solve_times_ms=tuple(float(t) for t in times))
 
 
@@ -211,3 +213,33 @@ def test_the_leaderboard_says_why_a_small_comparison_is_not_starred():
     rows = [ln for ln in md.splitlines() if ln.startswith("| synthetic | random vs social-force")]
     assert len(rows) == 1 and "*" not in rows[0] and "-0.01 (2 pairs) n.t." in rows[0]
     assert "n.t.: not tested, too few pairs" in md and "at least 20 pairs" in md and "at least 6 discordant" in md
+
+
+def test_group_intrusion_is_measured_only_where_the_crowd_had_labels():
+    """A recording without a group file has no labels: its episodes neither count as intrusion-free nor enter the
+    paired intrusion test, and a summary of such episodes alone says n/a, not 0."""
+    from envs.evaluation.report import intrusion_text, rate_text
+
+    labelled = [_rec(s, "success", ttg=5.0, intr=s < 2) for s in range(4)]
+    unlabelled = [_rec(s, "success", ttg=5.0, intr=None, cell="real") for s in range(4, 10)]
+    agg = aggregate(labelled + unlabelled)
+    assert agg["labelled"] == 4 and agg["group_intrusion_rate"] == 0.5
+    assert agg["group_intrusion_rate_success"] == 0.5 and agg["success_rate"] == 1.0  # successes: all 10
+    none = aggregate(unlabelled)
+    assert none["labelled"] == 0 and none["group_intrusion_rate"] is None
+    assert intrusion_text(none, "group_intrusion_rate") == "n/a" == rate_text(none, "group_intrusion_rate")
+    assert intrusion_text(agg, "group_intrusion_rate") == "0.50"
+    a = [_rec(s, "success", intr=True, policy="a") for s in range(4)] + \
+        [_rec(s, "success", intr=None, policy="a", cell="real") for s in range(4, 10)]
+    b = [_rec(s, "success", intr=False, policy="b") for s in range(4)] + \
+        [_rec(s, "success", intr=None, policy="b", cell="real") for s in range(4, 10)]
+    paired = paired_comparison(a, b)
+    assert paired["pairs"] == 10 and paired["group_intrusion"]["pairs"] == 4
+    assert (paired["group_intrusion"]["a_only"], paired["group_intrusion"]["b_only"]) == (4, 0)
+    assert paired["success"]["pairs"] == 10
+
+
+def test_an_unlabelled_record_round_trips_as_none():
+    rec = replace(_rec(0, "success", intr=None), intrusion_fraction=None)
+    back = EpisodeRecord.from_json(json.loads(json.dumps(rec.to_json())))
+    assert back.group_intrusion is None and back.intrusion_fraction is None and back == rec

@@ -31,12 +31,17 @@ def test_tuning_suite_shares_no_recording_or_episode_with_the_reported_suite():
     assert min(min(c.seeds) for c in tune.cells) > max(max(c.seeds) for c in reported.cells)
 
 
-def test_tuning_suite_uses_the_reported_defaults_and_dense_cells():
+def test_tuning_suite_uses_the_reported_defaults_and_settings():
+    """Its simulated cells are settings of the reported suite (version 2: the dense ones; version 3 adds a door and
+    a sparse corridor) at other seeds."""
     tune, reported = load_suite("crowdnav-tune"), load_suite("crowdnav-v1")
     assert tune.cells[0].defaults == reported.cells[0].defaults
-    dense = {(c.spec["scenario"], c.spec["n_pedestrians"]) for c in reported.cells
-             if not c.is_real and "high" in c.name}
-    assert {(c.spec["scenario"], c.spec["n_pedestrians"]) for c in tune.cells if not c.is_real} <= dense
+
+    def settings(suite):
+        return {(c.spec["scenario"], c.spec["n_pedestrians"], c.spec["robot_visible"], str(c.spec.get("options")))
+                for c in suite.cells if not c.is_real}
+    assert settings(tune) <= settings(reported)
+    assert {"bottleneck", "corridor", "plaza", "crossing", "circle_crossing"} <= {s[0] for s in settings(tune)}
 
 
 def test_check_suite_is_the_reported_real_cells_at_other_seeds():
@@ -88,3 +93,42 @@ def test_compare_runs_pairs_by_cell_and_seed(tmp_path, capsys, load_script):
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__]))
+
+
+def test_reported_real_cells_name_the_ucy_group_files_and_no_biwi_ones(tmp_path):
+    """crowdnav-v1 version 6: zara1, zara2 and univ's students003 episodes carry the public UCY group annotations (the
+    four students003 pedestrians listed twice merge their groups); eth, hotel and students001 have none."""
+    for suite in (load_suite("crowdnav-v1"), load_suite("crowdnav-v1-check")):
+        groups = {c.name: c.spec.get("groups", {}) for c in suite.cells if c.is_real}
+        assert {n for n, g in groups.items() if g} == {"real-univ", "real-zara1", "real-zara2"}
+        named = [Path(f) for g in groups.values() for f in [*g, *g.values()]]
+        assert not any(p.parts[0] in ("eth", "hotel") or "biwi" in p.name for p in named)
+        univ = suite.cell("real-univ")
+        by_file = {univ.env_config(s, tmp_path).replay.path.name: univ.env_config(s, tmp_path).replay for s in (0, 1)}
+        assert by_file["students003.txt"].groups_path.name == "students003.groups.txt"
+        assert by_file["students003.txt"].group_overlaps == "merge"
+        assert by_file["students001.txt"].groups_path is None
+
+
+@pytest.mark.parametrize(("change", "needle"), [
+    ({"groups": {"zara1/test/other.txt": "../g.txt"}}, "does not replay"),
+    ({"group_overlaps": "drop"}, "group_overlaps must be error or merge"),
+])
+def test_a_cell_with_a_bad_group_entry_is_refused(change, needle):
+    from envs.evaluation.suite import parse_suite
+
+    cell = {"name": "r", "replay": ["zara1/test/crowds_zara01.txt"], "frame_step_s": 0.4, "episodes": 1, "seed0": 0}
+    with pytest.raises(ValueError, match=needle):
+        parse_suite({"name": "s", "version": 1, "cells": [cell | change]})
+
+
+def test_a_missing_group_file_is_reported_before_any_episode(tmp_path):
+    from envs.evaluation.suite import parse_suite
+
+    (tmp_path / "z").mkdir()
+    (tmp_path / "z" / "rec.txt").write_text("0\t1\t0.0\t0.0\n")
+    cell = {"name": "r", "replay": ["z/rec.txt"], "frame_step_s": 0.4, "episodes": 1, "seed0": 0,
+            "groups": {"z/rec.txt": "../nowhere/rec.groups.txt"}}
+    suite = parse_suite({"name": "s", "version": 1, "cells": [cell]})
+    with pytest.raises(ValueError, match=r"group file .* not found"):
+        suite.check_data(list(suite.cells), tmp_path)

@@ -1,0 +1,167 @@
+"""A global route through the walls, so that the local MPC has a goal it can reach.
+
+The MPC is local: its horizon (4 s) sees a few metres, and its goal cost pulls straight at the goal. With the goal
+behind a wall (a door, a corner) it slides along the wall and never finds the way round. The route layer gives it
+a subgoal (a "carrot") on a shortest path through the walls instead:
+
+* `grid_route`: a shortest path on an 8-connected grid (cells of `RouteConfig.cell_m`) over the free space, the
+  cells at least the MPC's wall clearance (robot radius + wall margin) from every wall segment. Each step costs
+  its length times (1 + `clearance_weight` * max(0, `comfort_m` - clearance) / `comfort_m`), so the path keeps to
+  the middle of doors and corridors. Solved with scipy's Dijkstra (imported only when a route is searched) once
+  per goal and wall map.
+* `Router.subgoal`: where the goal is in sight (the straight segment keeps the clearance from every wall), the goal
+  itself, so that scenes without walls in the way plan exactly as without a router. Otherwise the farthest path
+  point within `lookahead_m` (along the path, from the point nearest the robot) that the robot can see, slid
+  forward along the path to `lookahead_m` from the robot when it is nearer, so that the MPC does not brake at a
+  corner. The route is searched again when the goal or the walls change, or when the robot strays more than
+  `replan_distance_m` from it.
+
+Units: metres. Walls are segments (W, 4) x0, y0, x1, y1, as everywhere in the planner.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.config import RouteConfig
+from planner.scene import point_segment_distances
+
+NEIGHBOURS = ((1, 0), (0, 1), (1, 1), (1, -1))  # half of the 8 neighbours; edges are undirected
+
+
+def wall_clearance(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Distance (m) from each point (..., 2) to the nearest wall of walls (W, 4); +inf without walls."""
+    points = np.asarray(points, float)
+    if len(walls) == 0:
+        return np.full(points.shape[:-1], np.inf)
+    return point_segment_distances(points, walls).min(-1)
+
+
+def in_sight(start: np.ndarray, ends: np.ndarray, walls: np.ndarray, clearance_m: float, step_m: float) -> np.ndarray:
+    """(E,) bool: the straight segments from start (2,) to each of ends (E, 2) keep clearance_m from every wall
+    (checked at points at most step_m apart), or, from a start nearer a wall than that, come no nearer to any wall
+    than the start is."""
+    ends = np.atleast_2d(np.asarray(ends, float))
+    if len(walls) == 0:
+        return np.ones(len(ends), bool)
+    n = max(2, int(np.ceil(np.linalg.norm(ends - start, axis=1).max(initial=0.0) / step_m)) + 1)
+    s = np.linspace(0.0, 1.0, n)[None, :, None]
+    pts = start + s * (ends[:, None, :] - start)  # (E, n, 2)
+    need = min(clearance_m, float(wall_clearance(start, walls)) - 1e-9)
+    return (wall_clearance(pts, walls) >= need).all(axis=1)
+
+
+def grid_route(start: np.ndarray, goal: np.ndarray, walls: np.ndarray, cfg: RouteConfig,
+               clearance_m: float) -> np.ndarray | None:
+    """A shortest path (P, 2) m from start to goal through the free grid cells, those at least clearance_m from
+    every wall (see the module docstring), from the
+    start's cell to the goal's, with start and goal themselves as its ends; None when no path exists. A start or
+    goal cell inside the walls' clearance is joined to its nearest free cell."""
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+    pts = np.vstack([walls[:, :2], walls[:, 2:], start, goal]) if len(walls) else np.vstack([start, goal])
+    lo, hi = pts.min(0) - cfg.padding_m, pts.max(0) + cfg.padding_m
+    nx, ny = (np.ceil((hi - lo) / cfg.cell_m).astype(int) + 1)
+    if nx * ny > cfg.max_cells:
+        raise ValueError(f"route grid of {nx} x {ny} cells exceeds RouteConfig.max_cells={cfg.max_cells}; "
+                         "raise cell_m")
+    xs, ys = lo[0] + cfg.cell_m * np.arange(nx), lo[1] + cfg.cell_m * np.arange(ny)
+    centres = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)  # (nx, ny, 2)
+    clear = wall_clearance(centres, walls)
+    free = clear >= clearance_m
+    ends = [_nearest_free(p, lo, cfg.cell_m, centres, free) for p in (start, goal)]
+    if ends[0] is None or ends[1] is None:
+        return None
+    penalty = 1.0 + cfg.clearance_weight * np.clip(cfg.comfort_m - clear, 0.0, None) / cfg.comfort_m
+    from scipy.sparse.csgraph import dijkstra  # imported here: `import planner` stays numpy + casadi
+
+    graph = _grid_graph(free, penalty, cfg.cell_m)
+    index = np.arange(nx * ny).reshape(nx, ny)
+    src, dst = index[ends[0]], index[ends[1]]
+    dist, pred = dijkstra(graph, directed=False, indices=src, return_predecessors=True)
+    if not np.isfinite(dist[dst]):
+        return None
+    cells = [dst]
+    while cells[-1] != src:
+        cells.append(pred[cells[-1]])
+    path = centres.reshape(-1, 2)[np.array(cells[::-1])]
+    return np.vstack([start, path, goal])
+
+
+def _nearest_free(p: np.ndarray, lo: np.ndarray, cell_m: float, centres: np.ndarray,
+                  free: np.ndarray) -> tuple[int, int] | None:
+    """The grid index of p's cell if free, else of the nearest free cell; None without free cells."""
+    i, j = np.clip(np.rint((p - lo) / cell_m).astype(int), 0, np.array(free.shape) - 1)
+    if free[i, j]:
+        return int(i), int(j)
+    if not free.any():
+        return None
+    d = np.where(free, np.linalg.norm(centres - p, axis=-1), np.inf)
+    return tuple(int(v) for v in np.unravel_index(np.argmin(d), d.shape))
+
+
+def _grid_graph(free: np.ndarray, penalty: np.ndarray, cell_m: float):
+    """Sparse undirected graph over the grid: free neighbours joined by length * mean penalty of the two cells."""
+    from scipy.sparse import coo_matrix
+
+    nx, ny = free.shape
+    index = np.arange(nx * ny).reshape(nx, ny)
+    rows, cols, weights = [], [], []
+    for di, dj in NEIGHBOURS:
+        a = (slice(0, nx - di), slice(max(0, -dj), ny - max(0, dj)))
+        b = (slice(di, nx), slice(max(0, dj), ny - max(0, -dj) if dj < 0 else ny))
+        both = free[a] & free[b]
+        rows.append(index[a][both])
+        cols.append(index[b][both])
+        weights.append(cell_m * np.hypot(di, dj) * 0.5 * (penalty[a][both] + penalty[b][both]))
+    return coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(nx * ny, nx * ny)).tocsr()
+
+
+class Router:
+    """Subgoals for a local planner (see the module docstring). Keeps the last route; `reset()` forgets it."""
+
+    def __init__(self, config: RouteConfig, clearance_m: float) -> None:
+        if not (np.isfinite(clearance_m) and clearance_m >= 0):
+            raise ValueError(f"clearance_m must be >= 0 m, got {clearance_m!r}")
+        self.config, self.clearance_m = config, float(clearance_m)
+        self._key: tuple | None = None
+        self._path: np.ndarray | None = None  # (P, 2) m
+        self._arc: np.ndarray | None = None  # (P,) m, arc length along the path
+
+    def reset(self) -> None:
+        self._key, self._path, self._arc = None, None, None
+
+    def subgoal(self, position: np.ndarray, goal: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
+        """The point (2,) m the local planner should head for, from the robot's position (2,) m to goal (2,) m among
+        walls (W, 4) m (None: none). The goal itself when it is in sight or no route exists."""
+        position, goal = np.asarray(position, float), np.asarray(goal, float)
+        walls = np.zeros((0, 4)) if walls is None else np.asarray(walls, float).reshape(-1, 4)
+        cfg = self.config
+        if in_sight(position, goal[None], walls, self.clearance_m, 0.5 * cfg.cell_m)[0]:
+            return goal
+        key = (goal.tobytes(), walls.tobytes())
+        near = self._nearest(position) if key == self._key else None
+        if near is None or np.linalg.norm(self._path[near] - position) > cfg.replan_distance_m:
+            self._key, self._path = key, grid_route(position, goal, walls, cfg, self.clearance_m)
+            if self._path is None:
+                return goal
+            self._arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(self._path, axis=0), axis=1))]
+            near = self._nearest(position)
+        return self._carrot(position, near, walls)
+
+    def _nearest(self, position: np.ndarray) -> int | None:
+        if self._path is None:
+            return None
+        return int(np.argmin(np.linalg.norm(self._path - position, axis=1)))
+
+    def _carrot(self, position: np.ndarray, near: int, walls: np.ndarray) -> np.ndarray:
+        cfg, path, arc = self.config, self._path, self._arc
+        ahead = np.flatnonzero((arc >= arc[near]) & (arc <= arc[near] + cfg.lookahead_m))
+        seen = ahead[in_sight(position, path[ahead], walls, self.clearance_m, 0.5 * cfg.cell_m)]
+        last = int(seen.max()) if seen.size else min(near + 1, len(path) - 1)
+        carrot = path[last]
+        short = cfg.lookahead_m - np.linalg.norm(carrot - position)
+        if short > 0 and last < len(path) - 1:  # slide on along the path so that the robot need not brake
+            on = np.flatnonzero(arc >= arc[last] + short)
+            carrot = path[on[0]] if on.size else path[-1]
+        return carrot
