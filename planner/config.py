@@ -192,8 +192,10 @@ class MPCConfig:
 
 # Recommended MPC among real (replayed, non-reactive) crowds: a 0.3 m margin at the 0.4 s knots, clearance inflation
 # with prediction time and sample spread (capped at 0.5 m), the safety shield (planner/shield.py) in place of the
-# MPC's mid-step checks, and the 12 nearest pedestrians constrained. Tuned only on cells and seeds that no reported
-# result uses; how each setting was chosen, with its numbers: docs/decisions/planner-settings.md.
-# Set `robot=` to the env's robot with dataclasses.replace.
+# MPC's mid-step checks, and the 12 nearest pedestrians constrained; since 2026-11-25 a 0.05 m margin to walls and
+# the global route (planner/route.py). Tuned only on cells and seeds that no reported result uses; how each setting
+# was chosen, with its numbers: docs/decisions/planner-settings.md. Set `robot=` to the env's robot with
+# dataclasses.replace.
 CROWD_MPC = MPCConfig(safety_margin_m=0.3, check_midpoints=False, clearance_growth_mps=0.2, spread_inflation=0.5,
-                      max_clearance_inflation_m=0.5, shield_horizon_s=1.6, shield_margin_m=0.15, max_peds=12)
+                      max_clearance_inflation_m=0.5, shield_horizon_s=1.6, shield_margin_m=0.15, max_peds=12,
+                      wall_margin_m=0.05, route=RouteConfig())

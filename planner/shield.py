@@ -15,7 +15,9 @@ samples it did not keep, a pedestrian can still reach the robot. The shield clos
    with the least time-discounted violation ``mean_k sum_t exp(-t / shield_tau_s) * relu(margin - clearance)``
    (m). Ties go to the candidate nearest the MPC's control. With ``shield_hold_weight`` > 0 and a command the
    shield applied at the previous step (``previous``), every candidate also pays that weight times its
-   normalised distance from it: an evasive manoeuvre is kept unless another is clearly safer.
+   normalised distance from it: an evasive manoeuvre is kept unless another is clearly safer. A candidate whose
+   body would touch a wall within the look-ahead is taken only when every candidate would (before 2026-11-25 wall
+   contact was one more soft violation, and in dense corridors the shield steered the robot into the wall).
 
 With ``shield_cv`` (default) the pedestrians' last observed velocity, held over the look-ahead, is one more
 future that counts as certain (risk 1 when hit): at this range constant velocity is hard to beat, and a learned
@@ -39,6 +41,7 @@ from planner.scene import point_segment_distances, resample_in_time
 N_SPEEDS = 5  # candidate forward speeds (unicycle) / speed magnitudes (holonomic), rest excluded
 N_TURNS = 9  # candidate yaw rates (unicycle) / directions (holonomic: 2 * N_TURNS)
 DEVIATION_WEIGHT = 1e-3  # m of discounted violation per unit of normalised control change (tie-break)
+WALL_CONTACT_COST = 1e6  # added to a candidate whose body would touch a wall: chosen only if all would
 
 
 @dataclass(frozen=True)
@@ -134,6 +137,12 @@ def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, rob
     return np.minimum(ped, wall[:, None, :])
 
 
+def touches_wall(robot_xy: np.ndarray, walls: np.ndarray | None, robot_radius: float) -> np.ndarray:
+    """(C,) bool: the rollouts (C, T, 2) whose body touches a wall at some step. A wall is where it is, not a
+    prediction: such a command is chosen only when every candidate touches one."""
+    return (wall_clearance(robot_xy, walls) < robot_radius).any(-1)
+
+
 def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
                    walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None) -> ShieldVerdict:
     """Check the plan's controls (H, 2) (each held ``cfg.dt_s``; the first is the one to apply) from ``state``
@@ -163,5 +172,6 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     cost = violation + DEVIATION_WEIGHT * (((cands - cands[0]) / scale) ** 2).sum(-1)
     if previous is not None and cfg.shield_hold_weight > 0:
         cost = cost + cfg.shield_hold_weight * np.sqrt((((cands - previous) / scale) ** 2).sum(-1))
+    cost = cost + WALL_CONTACT_COST * touches_wall(robot_xy, walls, cfg.robot.radius_m)
     best = int(np.argmin(cost))
     return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))

@@ -159,3 +159,26 @@ def test_commitment_keeps_the_side_of_an_evasive_manoeuvre():
 def test_invalid_hold_weight_raises():
     with pytest.raises(ValueError):
         MPCConfig(shield_hold_weight=-0.1)
+
+
+def test_the_shield_never_steers_into_a_wall_while_another_command_stays_clear(monkeypatch):
+    """A pedestrian comes at the robot from ahead-left; turning right, away from them, leads into a wall 0.15 m off
+    the robot's right side. The wall is certain, the pedestrian a prediction: the shield keeps the robot off the wall.
+    With wall contact one more soft violation (before 2026-11-25; WALL_CONTACT_COST 0) it steered into the wall, as it
+    did in dense corridors."""
+    import planner.shield as shield
+
+    state = np.array([0.0, 0.0, 0.0, 0.6, 0.0])  # heading +x at 0.6 m/s
+    wall = np.array([[-5.0, -0.45, 5.0, -0.45]])
+    pred = _crossing([2.0, 0.8], [-1.2, -0.5])
+    stop = np.zeros((10, 2))  # the plan: stop
+
+    def touches(command) -> bool:
+        xy = rollout_candidates(state, np.tile(command, (1, 16, 1)), 0.1, SHIELD.robot)
+        return bool(shield.touches_wall(xy, wall, SHIELD.robot.radius_m)[0])
+
+    verdict = shield_control(state, stop, pred, wall, SHIELD)
+    assert verdict.replaced and not touches(verdict.control)
+    monkeypatch.setattr(shield, "WALL_CONTACT_COST", 0.0)
+    soft = shield_control(state, stop, pred, wall, SHIELD)
+    assert soft.replaced and touches(soft.control)
