@@ -2,7 +2,8 @@
 
 `step(action)` runs a fixed sequence:
     1. apply action: scale [-1, 1]^2 to the robot's limits, clip to the reachable accelerations, integrate
-       the robot with the planner's dynamics;
+       the robot with the planner's dynamics (`step_control(control)` starts from a control in the robot's units
+       instead, clipped the same way; the episode loop applies a planner's control so, `step_decision`);
     2. simulate: the crowd advances dt_s with the robot moving along that step (visible or not);
     3. observe: (on each 0.4 s tick) record the pedestrians' history, predict if configured; build the
        observation;
@@ -124,11 +125,33 @@ class CrowdNavEnv(gym.Env):
         return self._obs, {"goal_distance_m": self._goal_distance()}
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        self._check_running()
+        return self._advance(self.action_to_control(action))
+
+    def step_control(self, control: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        """`step()` with a control (2,) in the robot's units (unicycle v m/s, omega rad/s; holonomic vx, vy m/s)
+        instead of an action, clipped to the robot's velocity and acceleration limits over dt_s: a planner's control
+        as it is (before crowdnav-v1 version 6 it went through the float32 action and was clipped twice)."""
+        self._check_running()
+        u = np.asarray(control, dtype=float)
+        if u.shape != (2,) or not np.all(np.isfinite(u)):
+            raise ValueError(f"control must be a finite (2,) array, got {u!r}")
+        return self._advance(clip_control(self.robot_state, u, self.config.dt_s, self.config.robot))
+
+    def step_decision(self, decision: Decision) -> tuple[dict, float, bool, bool, dict]:
+        """Step with a policy's `Decision`: its action (`step`) or its control (`step_control`)."""
+        if decision.action is not None:
+            return self.step(decision.action)
+        return self.step_control(decision.control)
+
+    def _check_running(self) -> None:
         if self._done:
             raise RuntimeError("step() called on a finished episode; call reset()")
+
+    def _advance(self, control: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        """The step sequence (module docstring) with the control (2,) already clipped to the robot's limits."""
         cfg = self.config
-        # 1. apply action
-        control = self.action_to_control(action)
+        # 1. apply the control
         before_pos, before = self.robot_state[:2].copy(), self._state
         self._step_start = (before_pos, before)
         dist_before = self._goal_distance()

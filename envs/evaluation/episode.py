@@ -24,7 +24,7 @@ import numpy as np
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.evaluation.records import EpisodeRecord, finite_or_none
-from envs.policies import PolicyConfig, act, make_policy
+from envs.policies import PolicyConfig, decide, make_policy
 
 
 @dataclass
@@ -63,14 +63,14 @@ def run_episode(config: CrowdNavConfig, policy_spec: str | PolicyConfig, seed: i
     peds, groups = [], []
     scalars: dict[str, float] = {}
     while not done:
-        action = act(policy, env)
+        decision = decide(policy, env)
         if observer is not None:
             observer.log(env.frame(scalars))
         if keep_scene:
             p = env.pedestrians()
             peds.append(p.pos.copy())
             groups.append(p.group_id.copy())
-        _, reward, terminated, truncated, info = env.step(action)
+        _, reward, terminated, truncated, info = env.step_decision(decision)
         robot.append(env.robot_state[:2].copy())
         ret += reward
         done = terminated or truncated

@@ -1,7 +1,8 @@
 """The policies room: what drives the robot.
 
-- `registry`: `PolicyConfig` -> `make_policy`, the registry `POLICIES`, the planner-based policies and `act`,
-  the one step of the episode loop (view -> `policy.act(view)` -> decision -> env action);
+- `registry`: `PolicyConfig` -> `make_policy`, the registry `POLICIES`, the planner-based policies and `decide`,
+  the one step of the episode loop (view -> `policy.act(view)` -> decision, applied by `env.step_decision`; `act`
+  gives the env action instead, for a Gym loop);
 - `plugins`: user policies (`module:factory`) and stable-baselines3 agents (`sb3:PATH.zip`);
 - `sb3_files`: SB3 agent files saved and loaded without unpickling, with the env's observation layout;
 - `identity`: what identifies a policy's weights in results (fingerprints for resuming);
@@ -25,6 +26,7 @@ from envs.policies.registry import (
     PolicyConfig,
     RandomPolicy,
     act,
+    decide,
     make_policy,
     singleton_prediction,
 )
@@ -32,5 +34,5 @@ from envs.policies.registry import (
 __all__ = [
     "AGENTS_DIR", "DEFAULT_PREDICTOR", "ENV_MPC", "POLICIES", "PREDICTOR_POLICIES", "REPLAN_EVERY_STEPS",
     "SCENE_TEMPLATE", "GPGraphPolicy", "LegacyPolicy", "PlannerPolicy", "Policy", "PolicyConfig", "RandomPolicy",
-    "act", "make_policy", "singleton_prediction",
+    "act", "decide", "make_policy", "singleton_prediction",
 ]

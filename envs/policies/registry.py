@@ -135,14 +135,20 @@ class Policy(Protocol):
         """The decision for the current step, from the view alone."""
 
 
-def act(policy: Policy, env: CrowdNavEnv) -> np.ndarray:
+def decide(policy: Policy, env: CrowdNavEnv) -> Decision:
     """One step of the episode loop: the policy's decision on the env's view, its annotations attached to the
-    frames drawn from now on, and the env action (2,) float32 it asks for."""
+    frames drawn from now on. `env.step_decision(decision)` applies it (a control as it is)."""
     decision = policy.act(env.view(history=getattr(policy, "reads_history", True),
                                    future=getattr(policy, "reads_future", False)))
     if decision.annotated:
         env.annotate(decision.plan, decision.predictions, decision.predicted_group_id)
-    return env.action_for(decision)
+    return decision
+
+
+def act(policy: Policy, env: CrowdNavEnv) -> np.ndarray:
+    """`decide`, as the env action (2,) float32 it asks for (for a Gym loop, or imitation labels; a control is
+    mapped to its action)."""
+    return env.action_for(decide(policy, env))
 
 
 class PlannerPolicy:

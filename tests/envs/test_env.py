@@ -12,6 +12,7 @@ import pytest
 import envs
 from envs import CrowdNavConfig, CrowdNavEnv, ObservationConfig
 from envs.replay import ReplayConfig
+from planner import step_robot
 
 SMALL = CrowdNavConfig(n_pedestrians=12, time_limit_s=8.0)
 
@@ -363,3 +364,24 @@ def test_history_notes_each_arrival_and_its_early_velocity():
                               np.array([[1.0, 0.0], [5.0, 5.0]]), 0.4)
     np.testing.assert_allclose(filled[:, 0], [[0.3, 1.0], [0.7, 1.0], [0.0, 0.0], [0.0, 0.0]])  # rows 0-1 filled
     np.testing.assert_array_equal(filled[:, 1], 0.0)  # first seen in row 0: nothing to fill
+
+
+def test_a_control_is_applied_as_it_is_and_an_action_through_its_scaling():
+    """step_control applies a planner's control clipped to the robot's limits, without the float32 action round
+    trip (crowdnav-v1 v6); step(action) and step_decision(Decision(action=...)) are the same step."""
+    from envs.view import Decision
+
+    control = np.array([0.123456789, 0.0987654321])  # reachable from rest in one step, not a float32 value
+    a, b, c = (CrowdNavEnv(SMALL) for _ in range(3))
+    for env in (a, b, c):
+        env.reset(seed=0)
+        env.robot_state[3:] = 0.0
+    a.step_control(control)
+    np.testing.assert_allclose(a.robot_state, step_robot(b.robot_state, control, SMALL.dt_s, SMALL.robot.model))
+    b.step_decision(Decision(control=control))
+    np.testing.assert_array_equal(a.robot_state, b.robot_state)
+    c.step(c.control_to_action(control))
+    assert not np.array_equal(c.robot_state, a.robot_state)  # the float32 round trip moves it
+    np.testing.assert_allclose(c.robot_state, a.robot_state, atol=1e-6)
+    with pytest.raises(ValueError, match="finite"):
+        a.step_control(np.array([np.nan, 0.0]))
