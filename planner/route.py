@@ -24,17 +24,9 @@ from __future__ import annotations
 import numpy as np
 
 from planner.config import RouteConfig
-from planner.scene import point_segment_distances
+from planner.scene import wall_clearance
 
 NEIGHBOURS = ((1, 0), (0, 1), (1, 1), (1, -1))  # half of the 8 neighbours; edges are undirected
-
-
-def wall_clearance(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
-    """Distance (m) from each point (..., 2) to the nearest wall of walls (W, 4); +inf without walls."""
-    points = np.asarray(points, float)
-    if len(walls) == 0:
-        return np.full(points.shape[:-1], np.inf)
-    return point_segment_distances(points, walls).min(-1)
 
 
 def in_sight(start: np.ndarray, ends: np.ndarray, walls: np.ndarray, clearance_m: float, step_m: float) -> np.ndarray:

@@ -157,6 +157,15 @@ def point_segment_distances(p: np.ndarray, seg: np.ndarray) -> np.ndarray:
     return np.linalg.norm(rel - t[..., None] * ab, axis=-1)
 
 
+def wall_clearance(points: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
+    """Distance (m) from each point (..., 2) to the nearest wall segment (W, 4); +inf without walls (the safety
+    shield's and the global route's)."""
+    points = np.asarray(points, float)
+    if walls is None or len(walls) == 0:
+        return np.full(points.shape[:-1], np.inf)
+    return point_segment_distances(points, walls).min(-1)
+
+
 def _nearest_walls(obstacles: np.ndarray | None, robot_xy: np.ndarray, w: int) -> tuple[np.ndarray, ...]:
     walls = np.tile(np.r_[robot_xy + FAR_M, robot_xy + FAR_M + 1.0], (w, 1))
     wall_mask = np.zeros(w)

@@ -36,7 +36,7 @@ import numpy as np
 from planner.config import MPCConfig, RobotConfig
 from planner.dynamics import clip_control, step_numpy
 from planner.prediction import PedPrediction, current_positions
-from planner.scene import point_segment_distances, resample_in_time
+from planner.scene import resample_in_time, wall_clearance
 
 N_SPEEDS = 5  # candidate forward speeds (unicycle) / speed magnitudes (holonomic), rest excluded
 N_TURNS = 9  # candidate yaw rates (unicycle) / directions (holonomic: 2 * N_TURNS)
@@ -85,13 +85,6 @@ def plan_commands(planned: np.ndarray, plan_dt_s: float, dt_s: float, n_steps: i
     control is held past the plan's end)."""
     idx = np.minimum((dt_s * np.arange(n_steps) / plan_dt_s + 1e-9).astype(int), len(planned) - 1)
     return np.asarray(planned, float)[idx]
-
-
-def wall_clearance(points: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
-    """Distance (m) from each point (..., 2) to the nearest wall segment (W, 4); +inf without walls."""
-    if walls is None or len(walls) == 0:
-        return np.full(points.shape[:-1], np.inf)
-    return point_segment_distances(points, walls).min(-1)
 
 
 def sample_futures(prediction: PedPrediction, dt_s: float, n_steps: int,
