@@ -46,9 +46,9 @@ def in_sight(start: np.ndarray, ends: np.ndarray, walls: np.ndarray, clearance_m
 def grid_route(start: np.ndarray, goal: np.ndarray, walls: np.ndarray, cfg: RouteConfig,
                clearance_m: float) -> np.ndarray | None:
     """A shortest path (P, 2) m from start to goal through the free grid cells, those at least clearance_m from
-    every wall (see the module docstring), from the
-    start's cell to the goal's, with start and goal themselves as its ends; None when no path exists. A start or
-    goal cell inside the walls' clearance is joined to its nearest free cell."""
+    every wall (see the module docstring): from the start's cell to the goal's, with start and goal themselves as
+    its ends; None when no path exists. A start or goal cell inside the walls' clearance is joined to its nearest
+    free cell."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     pts = np.vstack([walls[:, :2], walls[:, 2:], start, goal]) if len(walls) else np.vstack([start, goal])
     lo, hi = pts.min(0) - cfg.padding_m, pts.max(0) + cfg.padding_m
@@ -100,7 +100,7 @@ def _grid_graph(free: np.ndarray, penalty: np.ndarray, cell_m: float):
     rows, cols, weights = [], [], []
     for di, dj in NEIGHBOURS:
         a = (slice(0, nx - di), slice(max(0, -dj), ny - max(0, dj)))
-        b = (slice(di, nx), slice(max(0, dj), ny - max(0, -dj) if dj < 0 else ny))
+        b = (slice(di, nx), slice(max(0, dj), ny - max(0, -dj)))
         both = free[a] & free[b]
         rows.append(index[a][both])
         cols.append(index[b][both])
