@@ -38,7 +38,7 @@ def intrusion_text(result: dict[str, Any], key: str) -> str:
 def rate_text(result: dict[str, Any], key: str) -> str:
     """A rate with its 95% interval (group intrusion: "n/a" without labels, see `intrusion_text`)."""
     if key.startswith("group_intrusion") and result.get("labelled") == 0:
-        return "n/a"
+        return intrusion_text(result, key)
     ci = result.get(f"{key}_ci95")
     text = fmt(result[key])
     return f"{text} [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else text
