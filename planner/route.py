@@ -119,9 +119,10 @@ class Router:
         self._key: tuple | None = None
         self._path: np.ndarray | None = None  # (P, 2) m
         self._arc: np.ndarray | None = None  # (P,) m, arc length along the path
+        self._failed_at: np.ndarray | None = None  # (2,) m, where the last search for this key found no route
 
     def reset(self) -> None:
-        self._key, self._path, self._arc = None, None, None
+        self._key, self._path, self._arc, self._failed_at = None, None, None, None
 
     def subgoal(self, position: np.ndarray, goal: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
         """The point (2,) m the local planner should head for, from the robot's position (2,) m to goal (2,) m among
@@ -132,9 +133,13 @@ class Router:
         if in_sight(position, goal[None], walls, self.clearance_m, 0.5 * cfg.cell_m)[0]:
             return goal
         key = (goal.tobytes(), walls.tobytes())
+        if key == self._key and self._failed_at is not None and \
+                np.linalg.norm(position - self._failed_at) <= cfg.replan_distance_m:
+            return goal  # no route from here a moment ago: search again only once the robot has moved on
         near = self._nearest(position) if key == self._key else None
         if near is None or np.linalg.norm(self._path[near] - position) > cfg.replan_distance_m:
             self._key, self._path = key, grid_route(position, goal, walls, cfg, self.clearance_m)
+            self._failed_at = None if self._path is not None else position.copy()
             if self._path is None:
                 return goal
             self._arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(self._path, axis=0), axis=1))]

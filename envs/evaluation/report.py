@@ -142,13 +142,14 @@ def _rates_panel(ax: Any, results: list[dict[str, Any]]) -> None:
     width = 0.8 / len(results)
     x = np.arange(len(RATE_KEYS))
     for j, r in enumerate(results):
-        vals = [r[k] or 0.0 for k in RATE_KEYS]
+        rates = [r.get(k) for k in RATE_KEYS]  # None: not measured (group intrusion without labels)
+        vals = [0.0 if v is None else v for v in rates]
         err = np.concatenate([rate_errors([r], k) for k in RATE_KEYS], axis=1)
         bars = ax.bar(x + (j - (len(results) - 1) / 2) * width, vals, width, yerr=err, capsize=3,
                       label=r["policy"])
-        for b, v, top in zip(bars, vals, err[1], strict=True):
-            ax.text(b.get_x() + b.get_width() / 2, v + top + 0.02, f"{v:.2f}", ha="center", va="bottom",
-                    fontsize=7)
+        for b, v, top in zip(bars, rates, err[1], strict=True):
+            ax.text(b.get_x() + b.get_width() / 2, (v or 0.0) + top + 0.02, "n/a" if v is None else f"{v:.2f}",
+                    ha="center", va="bottom", fontsize=7)
     ax.set_xticks(x, [RATE_LABELS[k] for k in RATE_KEYS])
     ax.set_ylim(0, 1.15)
     ax.set_ylabel("fraction of episodes (95% Wilson CI)")

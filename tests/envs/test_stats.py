@@ -243,3 +243,15 @@ def test_an_unlabelled_record_round_trips_as_none():
     rec = replace(_rec(0, "success", intr=None), intrusion_fraction=None)
     back = EpisodeRecord.from_json(json.loads(json.dumps(rec.to_json())))
     assert back.group_intrusion is None and back.intrusion_fraction is None and back == rec
+
+
+def test_the_rates_figure_labels_an_unmeasured_intrusion_rate_n_a_not_zero():
+    from envs.evaluation.report import _rates_panel, pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots()
+    none = {**aggregate([_rec(s, "success", ttg=5.0, intr=None, cell="real") for s in range(4)]), "policy": "p"}
+    _rates_panel(ax, [none])
+    labels = [t.get_text() for t in ax.texts]
+    plt.close(fig)
+    assert labels == ["1.00", "0.00", "0.00", "n/a"]  # success, collision, timeout, group intrusion

@@ -39,6 +39,22 @@ def test_no_route_when_the_door_is_too_narrow_for_the_robot():
     np.testing.assert_array_equal(router.subgoal(IN_ROOM, OUTSIDE, DOOR_WALLS), OUTSIDE)  # falls back to the goal
 
 
+def test_a_failed_search_is_repeated_only_once_the_robot_has_moved(monkeypatch):
+    import planner.route as route
+
+    calls = []
+    real = route.grid_route
+    monkeypatch.setattr(route, "grid_route", lambda *a, **k: calls.append(1) or real(*a, **k))
+    router = Router(RouteConfig(replan_distance_m=1.0), clearance_m=0.55)
+    for dx in (0.0, 0.2, 0.5, 0.9):  # within 1 m of where no route was found: the goal, no new search
+        np.testing.assert_array_equal(router.subgoal(IN_ROOM + np.array([dx, 0.0]), OUTSIDE, DOOR_WALLS), OUTSIDE)
+    assert len(calls) == 1
+    router.subgoal(IN_ROOM + np.array([0.0, 1.5]), OUTSIDE, DOOR_WALLS)  # moved on: search again
+    assert len(calls) == 2
+    router.subgoal(IN_ROOM + np.array([0.0, 1.5]), np.array([11.0, 2.0]), DOOR_WALLS)  # a new goal: search again
+    assert len(calls) == 3
+
+
 def test_a_goal_in_sight_is_the_subgoal_itself():
     router = Router(RouteConfig(), CLEAR_M)
     goal = np.array([2.0, 6.0])
