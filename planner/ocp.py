@@ -21,7 +21,9 @@ f(z_k, u_k, dt/2), which stays local to stage k and catches fast head-on passes 
 
 * pedestrian m, mode j: ``mask_m (d(p, q_mj(t)) - clear_m(t)) + s_km >= 0`` (clear_m(t) may grow with t);
 * group g, mode j: ``mask_g (d(p, capsule segment_gj(t)) - clear_gj(t)) + s_kg >= 0``;
-* wall w: ``mask_w (d(p, segment_w) - (radius + wall margin)) + s_k,wall >= 0``.
+* wall w: ``mask_w (d_w(p) - (radius + wall margin)) + s_k,wall >= 0``, d_w the distance to the segment, negative
+  beyond it (signed by the side the robot is on now, where p projects inside the segment): a plan cannot jump
+  through a wall between knots.
 
 Hard constraints: z_0 equals the measured state, velocity and acceleration bounds, and (only when
 ``speed_cap_gain_per_s`` is finite) the per-stage speed cap ``v_k <= v_cap_k`` (unicycle) or
@@ -41,6 +43,7 @@ from planner.scene import SceneArrays
 
 EPS_DIST_M2 = 1e-6
 HUBER_M = 0.1
+WALL_END_BLEND_M = 0.05  # how far past a wall's end its far side still counts as beyond the wall (_wall_dist)
 
 
 @dataclass(frozen=True)
@@ -77,7 +80,8 @@ def param_shapes(sz: Sizes) -> dict[str, tuple[int, ...]]:
         "z0": (sz.nz,), "goal": (2,),
         "ped_pos": (sz.nt, sz.m, sz.k, 2), "ped_clear": (sz.nt, sz.m), "ped_mask": (sz.m,),
         "grp_a": (sz.nt, sz.g, sz.k, 2), "grp_b": (sz.nt, sz.g, sz.k, 2), "grp_clear": (sz.nt, sz.g, sz.k),
-        "grp_mask": (sz.g,), "walls": (sz.w, 4), "wall_mask": (sz.w,), "v_cap": (sz.h,),
+        "grp_mask": (sz.g,), "walls": (sz.w, 4), "wall_mask": (sz.w,), "wall_side": (sz.w,),
+        "v_cap": (sz.h,),
     }
 
 
@@ -114,6 +118,27 @@ def _seg_dist(pos: ca.SX, a, b) -> ca.SX:
     t = ca.fmin(ca.fmax(ca.dot(ap, ab) / (ca.dot(ab, ab) + 1e-9), 0), 1)
     diff = ap - t * ab
     return ca.sqrt(ca.dot(diff, diff) + EPS_DIST_M2)
+
+
+def _wall_dist(pos: ca.SX, a, b, side) -> ca.SX:
+    """Distance (m) from pos (2,) to the wall a-b, negative beyond it. On the robot's side of the wall's line (``side``:
+    +1 when the robot is left of a->b now, -1 right) it is the distance to the segment, as before; on the far side it
+    falls to minus the distance to the line where pos projects inside the segment, blended smoothly (over
+    ``WALL_END_BLEND_M``) into the distance to the segment beyond its ends. Unsigned, a plan could jump through a wall
+    between two knots for a small slack (measured: in the corridors the MPC planned through the walls into the empty
+    space behind them). The blend keeps the function smooth for the solvers (a hard switch at the ends made IPOPT
+    cycle at a wall's end)."""
+    ab = ca.vertcat(b[0] - a[0], b[1] - a[1])
+    ap = ca.vertcat(pos[0] - a[0], pos[1] - a[1])
+    length = ca.sqrt(ca.dot(ab, ab) + 1e-9)
+    along = ca.dot(ap, ab) / length  # m from a along the wall
+    perp = side * (ab[0] * ap[1] - ab[1] * ap[0]) / length  # m, > 0 on the robot's side
+    diff = ap - ca.fmin(ca.fmax(along / length, 0), 1) * ab
+    dist = ca.sqrt(ca.dot(diff, diff) + EPS_DIST_M2)
+    # logistic steps written with tanh, which saturates without overflow (exp overflowed for the far padding walls)
+    half = 2 * WALL_END_BLEND_M
+    inside = 0.25 * (1 + ca.tanh(along / half)) * (1 + ca.tanh((length - along) / half))
+    return dist + 2 * inside * ca.fmin(perp, 0)
 
 
 def _point_dist2(pos: ca.SX, q) -> ca.SX:
@@ -226,7 +251,8 @@ def _collision_terms(b: _Builder, k: int) -> None:
         _soft(b, k, exprs, s[sz.m + gi], need)
     if sz.w:
         clear = cfg.wall_clearance_m
-        exprs = [par["wall_mask"][i] * (_seg_dist(pos, par["walls"][i, :2], par["walls"][i, 2:]) - clear)
+        exprs = [par["wall_mask"][i] * (_wall_dist(pos, par["walls"][i, :2], par["walls"][i, 2:],
+                                                   par["wall_side"][i]) - clear)
                  for pos, _ in points for i in range(sz.w)]
         _soft(b, k, exprs, s[sz.ns - 1], need)
     b.slack_min.append(ca.fmax(ca.vertcat(*need), 0))

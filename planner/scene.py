@@ -55,6 +55,7 @@ class SceneArrays:
     grp_mask: np.ndarray  # (G,)
     walls: np.ndarray  # (W, 4) segments x1, y1, x2, y2
     wall_mask: np.ndarray  # (W,)
+    wall_side: np.ndarray  # (W,) +1 / -1: the side of each wall's line the robot is on now (left of x1y1->x2y2: +1)
     ped_index: np.ndarray  # (m_real,) which input pedestrians fill the first rows
     start_penetration_m: float  # > 0 when the robot already overlaps a pedestrian or a wall now
     v_cap: np.ndarray  # (H,) speed bound per stage, m/s (planner/risk.py; >= max speed when off)
@@ -166,6 +167,13 @@ def wall_clearance(points: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
     return point_segment_distances(points, walls).min(-1)
 
 
+def wall_sides(point: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """(W,) +1 where `point` (2,) m lies left of the wall's direction x1y1 -> x2y2 (or on its line), else -1."""
+    walls = np.asarray(walls, float).reshape(-1, 4)
+    ab, ap = walls[:, 2:] - walls[:, :2], np.asarray(point, float) - walls[:, :2]
+    return np.where(ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0] >= 0.0, 1.0, -1.0)
+
+
 def _nearest_walls(obstacles: np.ndarray | None, robot_xy: np.ndarray, w: int) -> tuple[np.ndarray, ...]:
     walls = np.tile(np.r_[robot_xy + FAR_M, robot_xy + FAR_M + 1.0], (w, 1))
     wall_mask = np.zeros(w)
@@ -173,7 +181,7 @@ def _nearest_walls(obstacles: np.ndarray | None, robot_xy: np.ndarray, w: int) -
         order = np.argsort(point_segment_distances(robot_xy, obstacles), kind="stable")[:w]
         walls[: order.size] = obstacles[order]
         wall_mask[: order.size] = 1.0
-    return walls, wall_mask
+    return walls, wall_mask, wall_sides(robot_xy, walls)
 
 
 def _nearest_groups(group_ids: np.ndarray, mask: np.ndarray, dist: np.ndarray, g: int) -> list[np.ndarray]:
@@ -257,12 +265,12 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     ped_mask = np.zeros(m)
     ped_mask[: order.size] = 1.0
     grp = _group_arrays(stage_pos, radii, groups, robot_xy, cfg)
-    walls, wall_mask = _nearest_walls(obstacles, robot_xy, cfg.max_walls)
+    walls, wall_mask, wall_side = _nearest_walls(obstacles, robot_xy, cfg.max_walls)
     depth = _start_penetration(robot_xy, now, radii, real, obstacles, cfg.robot.radius_m)
     mean_stage = samples[:, :, real].mean(axis=0) if samples is not None else np.zeros((h, 0, 2))
     goal = robot_xy + np.array([1.0, 0.0]) if goal is None else np.asarray(goal, float)
     v_cap = speed_cap(full_state, goal, mean_stage, now[real], radii[real], cfg)
-    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, order, depth, v_cap)
+    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, wall_side, order, depth, v_cap)
 
 
 def model_state_pad(cfg: MPCConfig) -> int:
