@@ -132,3 +132,23 @@ def test_a_missing_group_file_is_reported_before_any_episode(tmp_path):
     suite = parse_suite({"name": "s", "version": 1, "cells": [cell]})
     with pytest.raises(ValueError, match=r"group file .* not found"):
         suite.check_data(list(suite.cells), tmp_path)
+
+
+def test_trace_episode_replays_the_benchmark_episode_and_refuses_misuse(capsys, load_script):
+    """scripts/trace_episode.py runs the very episode the benchmark runs (same outcome and time), prints one line per
+    re-plan in its window, and refuses a seed outside the cell with one line on stderr and exit 2."""
+    from envs.evaluation.episode import run_episode
+    from envs.policies import PolicyConfig
+
+    trace = load_script("trace_episode")
+    cell = load_suite("crowdnav-tune").cell("tune-circle-high-invisible")
+    seed = cell.seeds[0]
+    assert trace.main(["crowdnav-tune", cell.name, str(seed), "--policy", "mpc-cv", "--from", "1", "--to", "2"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    m = run_episode(cell.env_config(seed), PolicyConfig("mpc-cv"), seed).metrics
+    assert lines[-1].startswith(f"{m['outcome']} at {m['time_s']:.1f} s")
+    replans = [ln for ln in lines[:-1] if ln.startswith("t=")]
+    assert len(replans) == 11 and all("slack=" in ln and "shield=" in ln for ln in replans)  # 1.0 .. 2.0 s, 0.1 s
+    assert trace.main(["crowdnav-tune", cell.name, "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("trace_episode: seed 5 is not one of")

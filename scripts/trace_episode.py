@@ -1,0 +1,99 @@
+"""Trace one benchmark episode of an MPC policy: every re-plan in a time window, one line each.
+
+Per re-plan: time, robot pose and speed, the solve's status and fallback, whether the safety shield replaced the
+plan's control (and the risk it saw), the plan's largest clearance violation (slack, m), the applied control, the
+plan's end point, the subgoal (the goal or the route's carrot), and the three nearest pedestrians (centre distance,
+position, velocity). Then the outcome. This is how the failures in docs/decisions/planner-settings.md were found
+(e.g. plans that ended behind a corridor wall). For tuning suites and cells; it reads nothing a policy may not.
+
+    .venv/bin/python scripts/trace_episode.py crowdnav-tune tune-corridor-low-visible 1009 --policy mpc-oracle \
+        --from 2 --to 10
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+import numpy as np
+
+from envs import CrowdNavEnv
+from envs.evaluation.suite import load_suite
+from envs.policies import PolicyConfig, decide, make_policy
+
+
+def _line(t: float, robot: np.ndarray, result: Any, peds: Any) -> str:
+    near = ""
+    if len(peds.pos):
+        dist = np.linalg.norm(peds.pos - robot[:2], axis=1)
+        near = " ".join(f"[{dist[i]:.2f} @({peds.pos[i, 0]:.1f},{peds.pos[i, 1]:.1f}) "
+                        f"v({peds.vel[i, 0]:.1f},{peds.vel[i, 1]:.1f})]" for i in np.argsort(dist)[:3])
+    sub = "-" if result.subgoal is None else f"({result.subgoal[0]:.1f},{result.subgoal[1]:.1f})"
+    speed = robot[3] if len(robot) > 4 else float(np.hypot(robot[2], robot[3]))
+    return (f"t={t:5.1f} robot=({robot[0]:5.2f},{robot[1]:5.2f}) v={speed:4.2f} {result.status:13s} "
+            f"fallback={result.fallback or '-':13s} shield={'yes' if result.shielded else 'no ':3s} "
+            f"risk={result.shield_risk:.2f} slack={result.max_slack_m:5.2f} u={np.round(result.control, 2)} "
+            f"end=({result.states[-1, 0]:.1f},{result.states[-1, 1]:.1f}) sub={sub} | {near}")
+
+
+def trace(suite: str, cell_name: str, seed: int, policy: str, t_from: float, t_to: float) -> str:
+    """Run the episode, print the re-plans between t_from and t_to (s); returns the outcome line."""
+    cell = load_suite(suite).cell(cell_name)
+    cfg = cell.env_config(seed)
+    env = CrowdNavEnv(cfg)
+    pol = make_policy(PolicyConfig(policy), env)
+    planner = getattr(pol, "planner", None)
+    if planner is None or not hasattr(planner, "plan"):
+        raise ValueError(f"{policy} has no planner to trace; MPC policies only (mpc-gpgraph, mpc-oracle, mpc-cv, ...)")
+    results: list[Any] = []
+    plan = planner.plan
+
+    def recorded(*args: Any, **kwargs: Any) -> Any:
+        results.append(plan(*args, **kwargs))
+        return results[-1]
+
+    planner.plan = recorded
+    env.reset(seed=seed)
+    pol.reset(seed)
+    done, step, info = False, 0, {}
+    while not done:
+        robot, peds, before = env.robot_state.copy(), env.pedestrians(), len(results)
+        decision = decide(pol, env)
+        if len(results) > before and t_from <= step * cfg.dt_s <= t_to:
+            print(_line(step * cfg.dt_s, robot, results[-1], peds))
+        _, _, term, trunc, info = env.step_decision(decision)
+        done, step = term or trunc, step + 1
+    m = info["episode_metrics"]
+    return f"{m['outcome']} at {m['time_s']:.1f} s" + (f" ({m['at_fault']} at fault)" if m["at_fault"] else "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    ap.add_argument("suite")
+    ap.add_argument("cell")
+    ap.add_argument("seed", type=int)
+    ap.add_argument("--policy", default="mpc-gpgraph")
+    ap.add_argument("--from", dest="t_from", type=float, default=0.0, help="first time to print, s")
+    ap.add_argument("--to", dest="t_to", type=float, default=float("inf"), help="last time to print, s")
+    args = ap.parse_args(argv)
+    try:
+        cell = load_suite(args.suite).cell(args.cell)
+        if args.seed not in cell.seeds:
+            raise ValueError(f"seed {args.seed} is not one of {args.cell}'s seeds ({cell.seeds[0]}..{cell.seeds[-1]})")
+        if not args.t_from <= args.t_to:
+            raise ValueError("--from must not be after --to")
+        make_policy(PolicyConfig(args.policy), CrowdNavEnv(cell.env_config(args.seed)))  # validates the name
+    except ValueError as exc:
+        print(f"trace_episode: {exc}", file=sys.stderr)
+        return 2
+    try:
+        print(trace(args.suite, args.cell, args.seed, args.policy, args.t_from, args.t_to))
+    except ValueError as exc:
+        print(f"trace_episode: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
