@@ -133,8 +133,7 @@ def _wall_dist(pos: ca.SX, a, b, side) -> ca.SX:
     length = ca.sqrt(ca.dot(ab, ab) + 1e-9)
     along = ca.dot(ap, ab) / length  # m from a along the wall
     perp = side * (ab[0] * ap[1] - ab[1] * ap[0]) / length  # m, > 0 on the robot's side
-    diff = ap - ca.fmin(ca.fmax(along / length, 0), 1) * ab
-    dist = ca.sqrt(ca.dot(diff, diff) + EPS_DIST_M2)
+    dist = _seg_dist(pos, a, b)
     # logistic steps written with tanh, which saturates without overflow (exp overflowed for the far padding walls)
     half = 2 * WALL_END_BLEND_M
     inside = 0.25 * (1 + ca.tanh(along / half)) * (1 + ca.tanh((length - along) / half))
