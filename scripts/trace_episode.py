@@ -83,11 +83,6 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"seed {args.seed} is not one of {args.cell}'s seeds ({cell.seeds[0]}..{cell.seeds[-1]})")
         if not args.t_from <= args.t_to:
             raise ValueError("--from must not be after --to")
-        make_policy(PolicyConfig(args.policy), CrowdNavEnv(cell.env_config(args.seed)))  # validates the name
-    except ValueError as exc:
-        print(f"trace_episode: {exc}", file=sys.stderr)
-        return 2
-    try:
         print(trace(args.suite, args.cell, args.seed, args.policy, args.t_from, args.t_to))
     except ValueError as exc:
         print(f"trace_episode: {exc}", file=sys.stderr)
