@@ -2,7 +2,7 @@
 
 Decision variables are stage-ordered for fatrop:
 ``z0 u0 s0 | z1 u1 s1 | ... | z_{H-1} u_{H-1} s_{H-1} | z_H s_H``, with z the robot state, u the control
-and s the slacks of that stage (one per pedestrian, one per group slot, one shared by the walls).
+and s the slacks of that stage (one shared by the pedestrians, one by the group slots, one by the walls).
 Constraints are ordered ``dyn_0 path_0 dyn_1 path_1 ... path_H`` with
 ``dyn_k = z_{k+1} - f(z_k, u_k, dt)``, and every path constraint is local to its stage.
 
@@ -64,7 +64,7 @@ class Sizes:
     @staticmethod
     def from_config(cfg: MPCConfig) -> Sizes:
         dims = model_dims(cfg.robot.model)
-        ns = cfg.max_peds + cfg.max_groups + (1 if cfg.max_walls else 0)
+        ns = 1 + (1 if cfg.max_groups else 0) + (1 if cfg.max_walls else 0)  # pedestrians, groups, walls
         return Sizes(dims.state_dim, dims.control_dim, ns, cfg.horizon_steps, cfg.max_peds, cfg.n_modes,
                      cfg.max_groups, cfg.max_walls, 2 if cfg.check_midpoints else 1)
 
@@ -234,20 +234,21 @@ def _social_cost(b: _Builder, k: int) -> None:
 
 
 def _collision_terms(b: _Builder, k: int) -> None:
-    """Soft clearance constraints and slack cost of stage k (0..H); one slack per pedestrian, group
-    slot and the walls, shared by the modes and the points checked in the stage."""
+    """Soft clearance constraints and slack cost of stage k (0..H): one slack shared by the pedestrians (all
+    of them, their modes and the points checked in the stage), one by the group slots and one by the walls. A slack
+    per pedestrian made every solve ~25% slower per iteration (fatrop's stage size grows with the slacks) and failed
+    more often, for the same plans where nothing is violated (docs/decisions/planner-settings.md, item 7)."""
     cfg, sz, par = b.cfg, b.sz, b.par
     points, s, need = _checked_points(b, k), b.s[k], []
-    for m in range(sz.m):
-        exprs = [par["ped_mask"][m] * (ca.sqrt(_point_dist2(pos, par["ped_pos"][t, m, j]) + EPS_DIST_M2)
-                                       - par["ped_clear"][t, m])
-                 for pos, t in points for j in range(sz.k)]
-        _soft(b, k, exprs, s[m], need)
-    for gi in range(sz.g):
+    exprs = [par["ped_mask"][m] * (ca.sqrt(_point_dist2(pos, par["ped_pos"][t, m, j]) + EPS_DIST_M2)
+                                   - par["ped_clear"][t, m])
+             for m in range(sz.m) for pos, t in points for j in range(sz.k)]
+    _soft(b, k, exprs, s[0], need)
+    if sz.g:
         exprs = [par["grp_mask"][gi] * (_seg_dist(pos, par["grp_a"][t, gi, j], par["grp_b"][t, gi, j])
                                         - par["grp_clear"][t, gi, j])
-                 for pos, t in points for j in range(sz.k)]
-        _soft(b, k, exprs, s[sz.m + gi], need)
+                 for gi in range(sz.g) for pos, t in points for j in range(sz.k)]
+        _soft(b, k, exprs, s[1], need)
     if sz.w:
         clear = cfg.wall_clearance_m
         exprs = [par["wall_mask"][i] * (_wall_dist(pos, par["walls"][i, :2], par["walls"][i, 2:],
