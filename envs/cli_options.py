@@ -24,7 +24,8 @@ FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-e
                "--threads": "threads", "--mpc": "mpc"}
 # registry policy -> the flags it reads (envs.policies.registry: mpc-gpgraph loads a torch predictor and draws
 # samples; the baseline MPCs re-plan on their own predictions; social-force acts every step, random reads nothing;
-# orca decides every ORCA step (0.25 s) with the crowd's ORCA settings; ppo-crowdnav is an SB3 agent). PolicyConfig.deterministic has no flag.
+# orca decides every ORCA step (0.25 s) with the crowd's ORCA settings; ppo-crowdnav is an SB3 agent).
+# PolicyConfig.deterministic has no flag.
 POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "mpc-gpgraph": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
     "mpc-oracle": ("--replan-every", "--mpc"),
