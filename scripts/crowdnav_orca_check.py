@@ -5,8 +5,10 @@ It runs the orca robot in CrowdNav's invisible setting with CrowdNav's rules, no
 decision, contact checked once per step on the robot's new velocity against each human's previous velocity, timeout
 once 24 s have passed, and CrowdNav's test cases (legacy numpy seeding, 1000 + case, humans drawn in CrowdNav's order).
 `--env-rules` instead checks contact along the true motions (as the env does) and times out at 25 s.
+`--through-env` runs the same cases through the env (suite crowdnav-classic's config, policy orca, the crowd's
+circle crossing swapped for CrowdNav's cases) and counts the cases whose outcome differs from the `--env-rules` loop.
 
-    python scripts/crowdnav_orca_check.py --cases 500 [--env-rules]
+    python scripts/crowdnav_orca_check.py --cases 500 [--env-rules | --through-env]
 """
 
 from __future__ import annotations
@@ -73,13 +75,44 @@ def episode(seed: int, n: int, env_rules: bool) -> tuple[str, float]:
             return "timeout", t
 
 
+def through_env(cases: int, n: int) -> list[tuple[str, float]]:
+    """The cases run by the env; prints how many outcomes differ from CrowdNav's loop under the env's rules."""
+    from envs.env import CrowdNavEnv
+    from envs.evaluation.suite import load_suite
+    from envs.orca_crowd import OrcaCrowd
+    from envs.policies import decide, make_policy
+
+    now = {"case": 0}
+    OrcaCrowd._circle_crossing = lambda self: case(now["case"], self.n)  # validation only: CrowdNav's test cases
+    env = CrowdNavEnv(load_suite("crowdnav-classic").cells[0].env_config(0))
+    policy = make_policy("orca", env)
+    res, differ = [], 0
+    for i in range(cases):
+        now["case"] = 1000 + i
+        env.reset(seed=i)
+        policy.reset(i)
+        done = False
+        while not done:
+            _, _, term, trunc, info = env.step_decision(decide(policy, env))
+            done = term or trunc
+        m = info["episode_metrics"]
+        res.append((m["outcome"], m["time_s"]))
+        differ += m["outcome"] != episode(1000 + i, n, True)[0]
+    print(f"through the env: {differ} of {cases} outcomes differ from CrowdNav's loop under the env's rules")
+    return res
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", type=int, default=500)
     ap.add_argument("--humans", type=int, default=5)
     ap.add_argument("--env-rules", action="store_true")
+    ap.add_argument("--through-env", action="store_true")
     args = ap.parse_args()
-    res = [episode(1000 + i, args.humans, args.env_rules) for i in range(args.cases)]
+    if args.through_env:
+        res = through_env(args.cases, args.humans)
+    else:
+        res = [episode(1000 + i, args.humans, args.env_rules) for i in range(args.cases)]
     outcomes = [o for o, _ in res]
     times = [t for o, t in res if o == "success"]
     k = len(res)
