@@ -13,6 +13,8 @@ $(STAMP): pyproject.toml Makefile
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet torch==2.13.0
 	$(PY) -m pip install --quiet -e ".[dev,bench,rl,ray]"
+	# ORCA (the crowdnav-classic/-plusplus suites): without its declared ir-sim, which it never imports (README)
+	$(PY) -m pip install --quiet --no-deps pyrvo==0.4.3
 	touch $(STAMP)
 
 # Main job on built-in defaults: a grouped crowd, GP-Graph prediction and the MPC robot end to end; writes the

@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder for <policy>.json/.md/.png, recordings and the comparison")
     e.add_argument("--pedestrians", type=int, default=None, help="crowd size (simulated scenarios; default 24)")
     e.add_argument("--invisible", action="store_true", help="pedestrians do not see the robot (simulated scenarios)")
+    e.add_argument("--crowd-model", default=None, metavar="NAME",
+                   help="simulated pedestrians: social-force (default) or orca (CrowdNav's ORCA humans, scenario "
+                   "circle_crossing, env step 0.05 s; needs pyrvo)")
     e.add_argument("--time-limit", type=float, default=None, metavar="S", help="episode time limit, s (default 40)")
     e.add_argument("--wall-rays", type=int, default=None, metavar="R",
                    help="observe R range rays to the walls (for agents trained with crowdnav train --wall-rays R)")
@@ -147,6 +150,10 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
         kw["groups"] = replace(GroupConfig(), max_size=max(1, min(GroupConfig().max_size, args.pedestrians)))
     if args.time_limit is not None:
         kw["time_limit_s"] = args.time_limit
+    if args.crowd_model is not None:
+        kw["crowd_model"] = args.crowd_model
+        if args.crowd_model == "orca":
+            kw["dt_s"] = 0.05  # divides both ORCA's 0.25 s step and the predictor's 0.4 s (envs.orca_crowd)
     if args.wall_rays is not None:
         from envs.config import ObservationConfig
 
@@ -154,6 +161,10 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
     config = CrowdNavConfig(**kw)
     if not replay:
         config.sim_config()  # validates the crowd settings before any worker starts
+        if config.crowd_model != "social-force":
+            from envs.env import make_crowd
+
+            make_crowd(config)  # a missing package (pyrvo) fails here
     else:
         from envs.env import make_crowd
 

@@ -24,7 +24,8 @@ FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-e
                "--threads": "threads", "--mpc": "mpc"}
 # registry policy -> the flags it reads (envs.policies.registry: mpc-gpgraph loads a torch predictor and draws
 # samples; the baseline MPCs re-plan on their own predictions; social-force acts every step, random reads nothing;
-# ppo-crowdnav is an SB3 agent). PolicyConfig.deterministic has no flag.
+# orca decides every ORCA step (0.25 s) with the crowd's ORCA settings; ppo-crowdnav is an SB3 agent).
+# PolicyConfig.deterministic has no flag.
 POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "mpc-gpgraph": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
     "mpc-oracle": ("--replan-every", "--mpc"),
@@ -34,6 +35,7 @@ POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "mpc-none": ("--replan-every", "--mpc"),
     "social-force": (),
     "random": (),
+    "orca": (),
     "ppo-crowdnav": ("--threads",),
 }
 SB3_FLAGS = ("--threads",)

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from crowdsim import SCENARIOS, GroupConfig, SimConfig
+from envs.crowd_models import DEFAULT_CROWD_MODEL, check_crowd_model
+from envs.orca_crowd import OrcaCrowdConfig
 from envs.timing import DEFAULT_TIMING
 from planner import RobotConfig
 
@@ -131,6 +133,9 @@ class CrowdNavConfig:
         until it is clear of the robot, and the contact is counted in the metrics (`spawn_contacts`).
     rewards, observation: see their classes.
     replay: an `envs.replay.ReplayConfig` for scenario "replay".
+    crowd_model: who the simulated pedestrians are (`envs.crowd_models.CROWD_MODELS`): "social-force" (crowdsim, the
+        default) or "orca" (CrowdNav's ORCA humans, scenario circle_crossing only, for comparability).
+    orca: the ORCA humans' settings (`envs.orca_crowd.OrcaCrowdConfig`), read by crowd model "orca" only.
     """
 
     scenario: str = "plaza"
@@ -152,6 +157,8 @@ class CrowdNavConfig:
     rewards: RewardWeights = field(default_factory=RewardWeights)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     replay: Any = None
+    crowd_model: str = DEFAULT_CROWD_MODEL
+    orca: OrcaCrowdConfig = field(default_factory=OrcaCrowdConfig)
 
     def __post_init__(self) -> None:
         valid = (*sorted(SCENARIOS), REPLAY_SCENARIO)
@@ -159,6 +166,10 @@ class CrowdNavConfig:
             raise ValueError(f"unknown scenario {self.scenario!r}; valid names: {', '.join(valid)}")
         if self.scenario == REPLAY_SCENARIO and self.replay is None:
             raise ValueError("scenario 'replay' needs replay=ReplayConfig(path=...)")
+        if self.scenario != REPLAY_SCENARIO or self.crowd_model != DEFAULT_CROWD_MODEL:
+            check_crowd_model(self.crowd_model, self.scenario)
+        if not isinstance(self.orca, OrcaCrowdConfig):
+            raise TypeError(f"CrowdNavConfig.orca must be envs.orca_crowd.OrcaCrowdConfig, got {type(self.orca)}")
         if not isinstance(self.robot, RobotConfig):
             raise TypeError(f"CrowdNavConfig.robot must be planner.RobotConfig (the robot's kinematic limits), got "
                             f"{type(self.robot).__module__}.{type(self.robot).__name__}; crowdsim.RobotSlot "
@@ -176,6 +187,10 @@ class CrowdNavConfig:
         step = DEFAULT_TIMING.step_s
         if abs(self.ticks_per_prediction_step * self.dt_s - step) > 1e-9:
             raise ValueError(f"dt_s must divide the {step} s prediction step, got {self.dt_s}")
+        k = round(self.orca.time_step_s / self.dt_s)
+        if self.crowd_model == "orca" and (k < 1 or abs(k * self.dt_s - self.orca.time_step_s) > 1e-9):
+            raise ValueError(f"the ORCA time step {self.orca.time_step_s} s must be a whole multiple of dt_s, got "
+                             f"dt_s {self.dt_s}")
 
     @property
     def ticks_per_prediction_step(self) -> int:

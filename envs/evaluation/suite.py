@@ -11,24 +11,31 @@ without a group file has no group labels: its group intrusion is "n/a". Any cell
 the scene's leave-one-out ETH/UCY checkpoint, trained without that scene). Episode i of a cell has seed seed0 + i;
 a replay cell with several files replays file (seed mod number of files) from a start time drawn from the seed.
 `defaults` are `CrowdNavConfig` fields (time limit, ...) applied to every cell. Every policy meets exactly the same
-episodes.
+episodes. A simulated cell may also name its `crowd_model` ("social-force", the default, or "orca":
+`envs.crowd_models`), the ORCA humans' settings `orca` (`envs.orca_crowd.OrcaCrowdConfig` fields) and the robot's
+`robot` (`planner.RobotConfig` fields; default the env's unicycle); unknown names or fields raise naming the valid ones.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from crowdsim import GroupConfig
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from envs.orca_crowd import OrcaCrowdConfig
+from planner import RobotConfig
 from predictor.ethucy import DEFAULT_DATA_DIR
 
 DEFAULT_DATA = DEFAULT_DATA_DIR  # predictor.ethucy owns the ETH/UCY data path (ETH_UCY_DIR overrides it)
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
-              "episodes", "seed0", "note", "scene", "predictor", "groups", "group_overlaps"}
+              "episodes", "seed0", "note", "scene", "predictor", "groups", "group_overlaps", "crowd_model", "orca",
+              "robot"}
+_SIM_ONLY_KEYS = {"crowd_model", "orca", "robot"}  # simulated cells only
+_NESTED = {"orca": OrcaCrowdConfig, "robot": RobotConfig}  # cell key -> the frozen config its fields build
 SIMULATED_SCENE = "synthetic"
 _DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m", "spawn_contact_ends_episode"}
 
@@ -83,6 +90,11 @@ class Cell:
                                         group_overlaps=str(self.spec.get("group_overlaps", "error")))
             return CrowdNavConfig(scenario=REPLAY_SCENARIO, **kw)
         n = int(self.spec["n_pedestrians"])
+        for key, cls in _NESTED.items():
+            if key in self.spec:
+                kw[key] = cls(**self.spec[key])
+        if "crowd_model" in self.spec:
+            kw["crowd_model"] = str(self.spec["crowd_model"])
         return CrowdNavConfig(scenario=self.spec["scenario"], n_pedestrians=n,
                               robot_visible=bool(self.spec["robot_visible"]),
                               scenario_options=tuple(sorted(self.spec.get("options", {}).items())),
@@ -138,6 +150,14 @@ def _check_cell(c: dict[str, Any], where: str) -> None:
     stray = set(c.get("groups", {})) - set(c.get("replay", []))
     if stray:
         raise ValueError(f"{where}: groups name file(s) the cell does not replay: {sorted(stray)}")
+    if "replay" in c and _SIM_ONLY_KEYS & set(c):
+        raise ValueError(f"{where}: a replay cell takes no {sorted(_SIM_ONLY_KEYS & set(c))}")
+    for key, cls in _NESTED.items():
+        valid = {f.name for f in fields(cls)}
+        if key in c and (not isinstance(c[key], dict) or set(c[key]) - valid):
+            raise ValueError(f"{where}: {key} must map {cls.__name__} fields to values; unknown: "
+                             f"{sorted(set(c[key]) - valid) if isinstance(c[key], dict) else c[key]!r}; "
+                             f"valid: {', '.join(sorted(valid))}")
     if c.get("group_overlaps", "error") not in ("error", "merge"):
         raise ValueError(f"{where}: group_overlaps must be error or merge, got {c['group_overlaps']!r}")
 

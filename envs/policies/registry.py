@@ -12,6 +12,8 @@ Registry names:
     mpc-none      MPC with pedestrians frozen where they stand (no prediction), no groups
     social-force  reactive social-force robot (every env step)
     random        uniform random actions (a baseline and a benchmark load)
+    orca          ORCA driving the robot, every pedestrian an ORCA agent (`envs.policies.orca`; the CrowdNav papers'
+                  baseline; needs the optional package pyrvo)
     ppo-crowdnav  the shipped PPO agent (`envs/policies/agents/ppo-crowdnav.zip`, trained with `envs.rl.train`: circle
                   crossing, 5 pedestrians who do not see the robot; RESULTS.md "RL baseline")
 
@@ -323,8 +325,15 @@ POLICIES: dict[str, Factory] = {
     "mpc-none": _planner("mpc-none"),
     "social-force": _planner("social-force", every=1),
     "random": lambda cfg, mpc, env: RandomPolicy(),
+    "orca": lambda cfg, mpc, env: _orca_policy(env),
     "ppo-crowdnav": _agent("ppo-crowdnav"),
 }
+
+
+def _orca_policy(env: CrowdNavEnv) -> Policy:
+    from envs.policies.orca import OrcaPolicy
+
+    return OrcaPolicy(env.config.orca.params)
 
 
 def make_policy(spec: str | PolicyConfig, env: CrowdNavEnv) -> Policy:
