@@ -10,11 +10,11 @@ import numpy as np
 from envs.social_metrics import (
     ZONES,
     group_contact,
-    hall_zone_index,
     mean_jerk,
     path_irregularity,
     spl,
-    step_time_to_collision,
+    ttc_unchecked,
+    zone_of,
 )
 
 
@@ -85,7 +85,7 @@ class EpisodeMetrics:
         if not self.positions:
             self.positions.append(self.start)
         self.positions.append((float(position[0]), float(position[1])))
-        zone = int(hall_zone_index(np.array([social.nearest_m]))[0])
+        zone = zone_of(social.nearest_m)
         if zone < len(ZONES):
             self.zone_steps[ZONES[zone]] += 1
         self.min_ttc_s = min(self.min_ttc_s, social.ttc_s)
@@ -154,7 +154,8 @@ def social_step(start: np.ndarray, end: np.ndarray, dt_s: float, robot_radius_m:
     already +inf), group_id (n,) their groups; before_pos (m, 2) m, before_vel (m, 2) m/s, before_radius (m,) m
     the people present at the start."""
     nearest = float(centre_m.min()) - robot_radius_m if len(centre_m) else math.inf
-    ttc = step_time_to_collision(start[None], ((end - start) / dt_s)[None], before_pos[None], before_vel[None],
-                                 before_radius, robot_radius_m)[0]
-    contact = bool(group_contact(surface_m[None], np.asarray(group_id, int)[None])[0]) if len(surface_m) else False
-    return SocialStep(nearest, float(ttc), contact)
+    ttc = float(ttc_unchecked(before_pos - start, before_vel - (end - start) / dt_s,
+                              before_radius + robot_radius_m).min()) if len(before_pos) else math.inf
+    touching = len(surface_m) and bool((surface_m < 0.0).any())  # (a contact ends the episode: rare)
+    contact = touching and bool(group_contact(surface_m[None], np.asarray(group_id, int)[None])[0])
+    return SocialStep(nearest, ttc, bool(contact))

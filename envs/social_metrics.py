@@ -22,12 +22,14 @@ Bad input (NaN where a value is needed, wrong shapes, dt <= 0) raises ValueError
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
 
 HALL_ZONES_M: tuple[tuple[str, float], ...] = (("intimate", 0.45), ("personal", 1.2), ("social", 3.6))
 ZONES: tuple[str, ...] = tuple(name for name, _ in HALL_ZONES_M)
+_ZONE_EDGES: tuple[float, ...] = tuple(r for _, r in HALL_ZONES_M)
 MIN_MOVE_M = 1e-6  # a displacement (or distance to the goal) below this has no direction
 
 
@@ -105,7 +107,14 @@ def hall_zone_index(distance_m: np.ndarray) -> np.ndarray:
     d = np.asarray(distance_m, dtype=float)
     if d.ndim != 1 or np.any(np.isnan(d)):
         raise ValueError(f"distance_m must be a (T,) array without NaN, got shape {d.shape}")
-    return np.searchsorted(np.array([r for _, r in HALL_ZONES_M]), d, side="right")
+    return np.searchsorted(np.array(_ZONE_EDGES), d, side="right")
+
+
+def zone_of(distance_m: float) -> int:
+    """`hall_zone_index` of one distance (m): 0 intimate, 1 personal, 2 social, 3 beyond (the env's per step)."""
+    if math.isnan(distance_m):
+        raise ValueError("distance_m must not be NaN")
+    return bisect.bisect_right(_ZONE_EDGES, distance_m)
 
 
 def zone_steps(distance_m: np.ndarray) -> dict[str, int]:
@@ -132,9 +141,15 @@ def time_to_collision(rel_pos: np.ndarray, rel_vel: np.ndarray, radius_sum_m: np
     r = np.broadcast_to(np.asarray(radius_sum_m, dtype=float), p.shape[:-1])
     if not np.all(np.isfinite(r)) or np.any(r < 0):
         raise ValueError("radius_sum_m must be finite and >= 0")
-    a = np.einsum("...i,...i->...", v, v)
-    b = 2.0 * np.einsum("...i,...i->...", p, v)
-    c = np.einsum("...i,...i->...", p, p) - r * r
+    return ttc_unchecked(p, v, r)
+
+
+def ttc_unchecked(p: np.ndarray, v: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """`time_to_collision` without the input checks (the env's per-step path, on arrays it already checked):
+    the smaller root of |p + t v|^2 = r^2 when the discs approach, 0 in contact, inf otherwise."""
+    a = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
+    b = 2.0 * (p[..., 0] * v[..., 0] + p[..., 1] * v[..., 1])
+    c = p[..., 0] * p[..., 0] + p[..., 1] * p[..., 1] - r * r
     disc = b * b - 4.0 * a * c
     approaching = (a > 0) & (b < 0) & (disc >= 0)
     with np.errstate(divide="ignore", invalid="ignore"):
