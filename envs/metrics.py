@@ -45,7 +45,7 @@ class EpisodeMetrics:
     group_collision: whether the robot touched a member of a group of >= 2 (None without group labels).
     path_irregularity_rad, jerk_mps3: None when undefined (no moving step; fewer than 3 steps).
     min_ttc_s: the smallest constant-velocity time to collision over the episode, s (inf: never on a course).
-    spl: success weighted by path length (start, goal, goal_tolerance_m: the route).
+    spl: success weighted by path length (start, goal, goal_tolerance_m: the route; None before any `observe`).
     """
 
     steps: int = 0
@@ -101,7 +101,8 @@ class EpisodeMetrics:
         out.update(group_collision=self.group_contact if self.labelled else None,
                    path_irregularity_rad=path_irregularity(xy, self.goal) if len(xy) else None,
                    jerk_mps3=mean_jerk(xy, self.dt_s) if self.dt_s > 0 else None, min_ttc_s=self.min_ttc_s,
-                   spl=spl(self.success, self.start, self.goal, self.path_length_m, self.goal_tolerance_m))
+                   spl=spl(self.success, self.start, self.goal, self.path_length_m, self.goal_tolerance_m)
+                   if self.positions else None)  # (no observed step: no route to measure against)
         return out
 
     @property

@@ -251,3 +251,25 @@ def test_old_and_new_runs_compare(tmp_path, capsys, load_script):
     assert cmp.main([str(old.path), str(new.path), "--policy", "p"]) == 0
     out = capsys.readouterr().out
     assert "pooled                         SPL: A n/a | B 0.900" in out
+
+
+def test_a_leaderboard_of_old_and_new_records_prints_n_a_for_the_old_policy():
+    from envs.evaluation.leaderboard import leaderboard, leaderboard_markdown
+    from envs.evaluation.suite import parse_suite
+    from envs.policies import PolicyConfig
+
+    suite = parse_suite({"name": "s", "version": 1, "cells": [
+        {"name": "c", "scenario": "corridor", "n_pedestrians": 4, "robot_visible": True, "episodes": 2, "seed0": 0}]})
+    old = [EpisodeRecord.from_json({**OLD, "policy": "random", "seed": s}) for s in range(2)]
+    new = [EpisodeRecord(**{**OLD, "policy": "social-force", "seed": s, "spl": 0.75, "group_collision": s == 0,
+                            "collision_course": True, "min_ttc_s": 1.0 + s, "solve_times_ms": ()}) for s in range(2)]
+    board = leaderboard(suite, list(suite.cells), [PolicyConfig("random"), PolicyConfig("social-force")], old + new)
+    pooled = board["pooled"]["synthetic"]
+    assert pooled["random"]["spl"] is None and pooled["social-force"]["spl"] == 0.75
+    assert pooled["social-force"]["group_collision_rate"] == 0.5 and pooled["social-force"]["min_ttc_s"] == 1.5
+    lines = leaderboard_markdown(board).splitlines()
+    [old_row] = [ln for ln in lines if ln.startswith("| synthetic | random |") and "n/a" in ln]
+    assert old_row.count("n/a") == 6  # every social column
+    [spl_row] = [ln for ln in lines if ln.startswith("| c | n/a |")]
+    assert spl_row == "| c | n/a | 0.750 |"
+    json.dumps(board, allow_nan=False)  # strict JSON: no inf or NaN
