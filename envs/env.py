@@ -32,7 +32,7 @@ from envs.frame import SceneFrame
 from envs.geometry import WallIndex
 from envs.history import PedHistory
 from envs.kernels import intruded_groups, step_distances
-from envs.metrics import EpisodeMetrics
+from envs.metrics import EpisodeMetrics, social_step
 from envs.observation import build_observation, observation_space
 from envs.prediction import load_predictor_spec, predict
 from envs.rewards import StepFacts, reward_terms, weighted
@@ -118,7 +118,8 @@ class CrowdNavEnv(gym.Env):
         if cfg.robot.model == "unicycle":
             self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
         self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
-        self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels)
+        self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels, start=tuple(start), goal=tuple(self.goal),
+                                      goal_tolerance_m=cfg.goal_tolerance_m, dt_s=cfg.dt_s)
         self._spawns.reset()
         self._done = False
         self._annotations = {}
@@ -176,6 +177,7 @@ class CrowdNavEnv(gym.Env):
         self.metrics.update(cfg.dt_s, math.sqrt(moved.dot(moved)),
                             facts.min_surface_distance_m, cfg.discomfort_distance_m, facts.intruding)
         self.metrics.spawn_contacts = self._spawns.count
+        self.metrics.observe(self.robot_state[:2], facts.social)
         # 5. terminated, 6. truncated
         terminated = facts.collided or facts.reached_goal
         truncated = (not terminated) and self.steps >= cfg.max_steps
@@ -365,8 +367,10 @@ class CrowdNavEnv(gym.Env):
         intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
                                          cfg.group_span_m, centre))
         dist_after = self._goal_distance()
+        social = social_step(before_pos, here, cfg.dt_s, r, centre, surface, p.group_id, before.pos[before.active],
+                             before.vel[before.active], before.radius[before.active])
         return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m, hit_wall, min_surface,
-                         intruding)
+                         intruding, social)
 
     def _is_new(self, row: int) -> bool:
         """Whether the pedestrian in state row `row` is new (`envs.collisions`): its slot held nobody or somebody

@@ -3,7 +3,19 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from envs.social_metrics import (
+    ZONES,
+    group_contact,
+    mean_jerk,
+    path_irregularity,
+    spl,
+    ttc_unchecked,
+    zone_of,
+)
 
 
 @dataclass
@@ -26,6 +38,14 @@ class EpisodeMetrics:
     intrusion_fraction: fraction of steps with such an overlap (None without labels).
     spawn_contacts: contacts of kind "spawn" that did not end the episode
         (`CrowdNavConfig.spawn_contact_ends_episode` False; `envs.collisions.SpawnContacts`).
+
+    The social-navigation metrics (`envs.social_metrics`; fed by `observe` once per step):
+    time_<zone>_s / <zone>_fraction: seconds / fraction of the steps with the nearest person in that Hall zone
+        (intimate, personal, social; exclusive bands, robot edge to person centre).
+    group_collision: whether the robot touched a member of a group of >= 2 (None without group labels).
+    path_irregularity_rad, jerk_mps3: None when undefined (no moving step; fewer than 3 steps).
+    min_ttc_s: the smallest constant-velocity time to collision over the episode, s (inf: never on a course).
+    spl: success weighted by path length (start, goal, goal_tolerance_m: the route; None before any `observe`).
     """
 
     steps: int = 0
@@ -43,6 +63,14 @@ class EpisodeMetrics:
     intrusion_steps: int = 0
     spawn_contacts: int = 0
     labelled: bool = True
+    start: tuple[float, float] = (0.0, 0.0)  # the route, m, and the step, s (set by the env at reset)
+    goal: tuple[float, float] = (0.0, 0.0)
+    goal_tolerance_m: float = 0.0
+    dt_s: float = 0.0
+    zone_steps: dict[str, int] = field(default_factory=lambda: dict.fromkeys(ZONES, 0))
+    min_ttc_s: float = math.inf
+    group_contact: bool = False
+    positions: list[tuple[float, float]] = field(default_factory=list, repr=False)
 
     def update(self, dt_s: float, moved_m: float, min_surface_m: float, comfort_m: float, intruding: bool) -> None:
         self.steps += 1
@@ -51,6 +79,31 @@ class EpisodeMetrics:
         self.min_distance_m = min(self.min_distance_m, min_surface_m)
         self.discomfort_steps += int(min_surface_m < comfort_m)
         self.intrusion_steps += int(intruding)
+
+    def observe(self, position: np.ndarray, social: SocialStep) -> None:
+        """The step's end position (2,) m and social facts (`social_step`)."""
+        if not self.positions:
+            self.positions.append(self.start)
+        self.positions.append((float(position[0]), float(position[1])))
+        zone = zone_of(social.nearest_m)
+        if zone < len(ZONES):
+            self.zone_steps[ZONES[zone]] += 1
+        self.min_ttc_s = min(self.min_ttc_s, social.ttc_s)
+        self.group_contact |= social.group_contact
+
+    def social_dict(self) -> dict[str, float | bool | None]:
+        """The social-navigation metrics (see the class docstring)."""
+        out: dict[str, float | bool | None] = {}
+        for zone, n in self.zone_steps.items():
+            out[f"time_{zone}_s"] = n * self.dt_s
+            out[f"{zone}_fraction"] = n / self.steps if self.steps else None
+        xy = np.array(self.positions, float).reshape(-1, 2)
+        out.update(group_collision=self.group_contact if self.labelled else None,
+                   path_irregularity_rad=path_irregularity(xy, self.goal) if len(xy) else None,
+                   jerk_mps3=mean_jerk(xy, self.dt_s) if self.dt_s > 0 else None, min_ttc_s=self.min_ttc_s,
+                   spl=spl(self.success, self.start, self.goal, self.path_length_m, self.goal_tolerance_m)
+                   if self.positions else None)  # (no observed step: no route to measure against)
+        return out
 
     @property
     def discomfort_frequency(self) -> float:
@@ -79,4 +132,31 @@ class EpisodeMetrics:
             "min_distance_m": self.min_distance_m, "discomfort_frequency": self.discomfort_frequency,
             "group_intrusion": self.group_intrusion, "intrusion_fraction": self.intrusion_fraction,
             "spawn_contacts": self.spawn_contacts,
+            **self.social_dict(),
         }
+
+
+@dataclass(frozen=True)
+class SocialStep:
+    """One step's social facts: nearest_m, the robot edge to the nearest person's centre at the step's end (m, inf
+    with nobody); ttc_s, the smallest time to collision at the step's start (s, inf: no course); group_contact,
+    whether the robot touched a member of a group of >= 2."""
+
+    nearest_m: float
+    ttc_s: float
+    group_contact: bool
+
+
+def social_step(start: np.ndarray, end: np.ndarray, dt_s: float, robot_radius_m: float, centre_m: np.ndarray,
+                surface_m: np.ndarray, group_id: np.ndarray, before_pos: np.ndarray, before_vel: np.ndarray,
+                before_radius: np.ndarray) -> SocialStep:
+    """The env's step as `SocialStep`: start, end (2,) m the robot's positions; centre_m, surface_m (n,) m the
+    distances to the n people present at the end (`envs.kernels.step_distances`, contacts that do not count
+    already +inf), group_id (n,) their groups; before_pos (m, 2) m, before_vel (m, 2) m/s, before_radius (m,) m
+    the people present at the start."""
+    nearest = float(centre_m.min()) - robot_radius_m if len(centre_m) else math.inf
+    ttc = float(ttc_unchecked(before_pos - start, before_vel - (end - start) / dt_s,
+                              before_radius + robot_radius_m).min()) if len(before_pos) else math.inf
+    touching = len(surface_m) and bool((surface_m < 0.0).any())  # (a contact ends the episode: rare)
+    contact = touching and bool(group_contact(surface_m[None], np.asarray(group_id, int)[None])[0])
+    return SocialStep(nearest, ttc, bool(contact))

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from envs.config import CrowdNavConfig
+from envs.metrics import SocialStep
 
 TERMS = ("progress", "success", "collision", "discomfort", "group_intrusion", "time")
 
@@ -28,6 +29,7 @@ class StepFacts:
     hit_wall: bool
     min_surface_distance_m: float  # to the nearest pedestrian (inf with nobody around)
     intruding: bool
+    social: SocialStep | None = None  # the metrics' social facts (`envs.metrics.social_step`); no reward uses them
 
     @property
     def collided(self) -> bool:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import pickle
 import time
 import traceback
@@ -23,7 +24,7 @@ import numpy as np
 
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
-from envs.evaluation.records import EpisodeRecord, finite_or_none
+from envs.evaluation.records import SOCIAL_FLOAT_FIELDS, EpisodeRecord, finite_or_none
 from envs.policies import PolicyConfig, decide, make_policy
 
 
@@ -135,7 +136,16 @@ def episode_record(result: Any, policy_name: str, seed: int, cell: str = "", fin
         spawn_contacts=int(m["spawn_contacts"]), plans=int(m["plans"]), fallbacks=int(m["fallbacks"]),
         ret=float(result.ret),
         wall_time_s=float(result.wall_time_s), fingerprint=fingerprint,
-        solve_times_ms=tuple(float(t) for t in result.solve_times_ms))
+        solve_times_ms=tuple(float(t) for t in result.solve_times_ms), **social_fields(m))
+
+
+def social_fields(m: dict[str, Any]) -> dict[str, Any]:
+    """The social-navigation fields of a record from `EpisodeMetrics.as_dict()` (None where a value is missing)."""
+    out = {k: finite_or_none(m.get(k)) for k in SOCIAL_FLOAT_FIELDS}
+    ttc = m.get("min_ttc_s")
+    out["collision_course"] = None if ttc is None else bool(math.isfinite(ttc))
+    out["group_collision"] = None if m.get("group_collision") is None else bool(m["group_collision"])
+    return out
 
 
 class _Runner:

@@ -16,7 +16,7 @@ import numpy as np
 from envs.atomic import write_json_atomic, write_text_atomic
 from envs.evaluation.records import EpisodeRecord
 from envs.evaluation.reference import REFERENCE_POLICY, against_reference, reference_table
-from envs.evaluation.report import fmt, intrusion_text, pyplot, rate_errors, rate_text, save_figure
+from envs.evaluation.report import SOCIAL_ROWS, fmt, intrusion_text, na, pyplot, rate_errors, rate_text, save_figure
 from envs.evaluation.stats import aggregate, paired_comparison
 from envs.evaluation.suite import Cell, Suite
 from envs.policies import PolicyConfig
@@ -108,6 +108,24 @@ def _summary(board: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _social(board: dict[str, Any]) -> list[str]:
+    """The social-navigation metrics per pool and policy (`report.SOCIAL_ROWS`; "n/a" where not measured, e.g.
+    records written before these metrics), then SPL per cell."""
+    lines = ["### Social-navigation metrics (all completed episodes; definitions: docs/envs.md)", "",
+             "| pool | policy | " + " | ".join(name for name, _ in SOCIAL_ROWS) + " |",
+             "|---|---|" + "---|" * len(SOCIAL_ROWS)]
+    for pool, res in board["pooled"].items():
+        lines += [f"| {pool} | {name} | " + " | ".join(f(r) for _, f in SOCIAL_ROWS) + " |"
+                  for name, r in res.items() if r is not None]
+    names = list(board["policies"])
+    lines += ["", "### SPL (success weighted by path length)", "", "| cell | " + " | ".join(names) + " |",
+              "|---|" + "---|" * len(names)]
+    for cell, entry in board["cells"].items():
+        lines.append(f"| {cell} | " + " | ".join("–" if (r := entry["results"][n]) is None else na(r.get("spl"), 3)
+                                                 for n in names) + " |")
+    return [*lines, ""]
+
+
 def _diff(d: dict[str, Any] | None) -> str:
     """A paired mean difference with its 95% interval, `*` when the interval excludes 0; "n.t." (not tested, no
     interval) below `stats.MIN_BOOTSTRAP_PAIRS` pairs."""
@@ -150,11 +168,13 @@ def _paired(board: dict[str, Any]) -> list[str]:
 
 
 def leaderboard_markdown(board: dict[str, Any]) -> str:
-    """The leaderboard as markdown: pooled summary, collision and success matrices, paired comparisons."""
+    """The leaderboard as markdown: pooled summary, collision and success matrices, social-navigation metrics,
+    paired comparisons."""
     head = [f"## Leaderboard: suite {board['suite']} v{board['version']}", "", board["description"], ""]
     body = (_summary(board) + _matrix(board, "collision_rate", "Collision rate [95% Wilson CI]")
             + _matrix(board, "avoidable_collision_rate", "Avoidable collision rate (robot or pedestrian at fault)")
-            + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + reference_table(board) + _paired(board))
+            + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + _social(board) + reference_table(board)
+            + _paired(board))
     return "\n".join(head + body)
 
 

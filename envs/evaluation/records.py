@@ -24,6 +24,10 @@ AT_FAULT = ("robot", "pedestrian", "spawn")
 AVOIDABLE_AT_FAULT = ("robot", "pedestrian")
 # Record fields renamed since records were first written: old name -> new name (old files still load).
 RENAMED_FIELDS = {"collision_kind": "at_fault"}
+# The float-valued social-navigation fields (`envs.social_metrics`); with group_collision and collision_course,
+# every field a record written before them lacks (they load as None: "n/a").
+SOCIAL_FLOAT_FIELDS = ("time_intimate_s", "intimate_fraction", "time_personal_s", "personal_fraction",
+                       "time_social_s", "social_fraction", "path_irregularity_rad", "jerk_mps3", "min_ttc_s", "spl")
 
 
 def finite_or_none(value: Any) -> float | None:
@@ -47,6 +51,13 @@ class EpisodeRecord:
     fallbacks; solve_times_ms: every solver call's wall time. group_intrusion / intrusion_fraction: None where the
     crowd had no group labels (`envs.crowd.Crowd.group_labels`). fingerprint: identifies the settings the episode
     ran under (suite, cell, policy); records merge only when it agrees.
+
+    The social-navigation metrics (`envs.social_metrics`; None in records written before they existed, in error
+    records, and where a metric is undefined): time_<intimate|personal|social>_s / <zone>_fraction, time (s) and
+    fraction of the episode's steps with the nearest person in that Hall zone; group_collision, contact with a
+    member of a group of >= 2 (None also without group labels); path_irregularity_rad; jerk_mps3 (m/s^3);
+    min_ttc_s, the smallest time to collision (s), with collision_course False when the robot was never on one
+    (then min_ttc_s is None: JSON has no inf; `min_ttc` gives inf); spl, success weighted by path length.
     """
 
     policy: str
@@ -69,6 +80,18 @@ class EpisodeRecord:
     fallbacks: int = 0
     ret: float = 0.0
     wall_time_s: float = 0.0
+    time_intimate_s: float | None = None
+    intimate_fraction: float | None = None
+    time_personal_s: float | None = None
+    personal_fraction: float | None = None
+    time_social_s: float | None = None
+    social_fraction: float | None = None
+    group_collision: bool | None = None
+    path_irregularity_rad: float | None = None
+    jerk_mps3: float | None = None
+    min_ttc_s: float | None = None
+    collision_course: bool | None = None
+    spl: float | None = None
     error: str | None = None
     fingerprint: str = ""
     solve_times_ms: tuple[float, ...] = field(default=(), repr=False)
@@ -83,6 +106,13 @@ class EpisodeRecord:
     def key(self) -> tuple[str, str, int]:
         """(cell, policy, seed): one episode of a benchmark."""
         return self.cell, self.policy, self.seed
+
+    @property
+    def min_ttc(self) -> float | None:
+        """The smallest time to collision, s: inf when never on a collision course, None when not measured."""
+        if self.collision_course is None:
+            return None
+        return self.min_ttc_s if self.collision_course else math.inf
 
     @property
     def avoidable_collision(self) -> bool:

@@ -14,6 +14,7 @@ import numpy as np
 
 from envs.atomic import write_atomic
 from envs.config import REPLAY_SCENARIO
+from envs.social_metrics import ZONES
 
 N_DRAWN = 3  # episodes drawn in the trajectories panel of the PNG
 RATE_KEYS = ("success_rate", "collision_rate", "timeout_rate", "group_intrusion_rate")
@@ -42,6 +43,41 @@ def rate_text(result: dict[str, Any], key: str) -> str:
     ci = result.get(f"{key}_ci95")
     text = fmt(result[key])
     return f"{text} [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else text
+
+
+def na(value: Any, digits: int = 2) -> str:
+    """A value that may not have been measured (records written before the metric existed): "n/a" for None."""
+    return "n/a" if value is None else fmt(value, digits)
+
+
+def measured_rate_text(result: dict[str, Any], key: str, measured_key: str) -> str:
+    """A rate with its 95% interval, or "n/a" where no episode measured it (`measured_key` 0 or missing)."""
+    return rate_text(result, key) if result.get(measured_key) and result.get(key) is not None else "n/a"
+
+
+def zones_text(result: dict[str, Any]) -> str:
+    """Mean seconds in the intimate / personal / social zones, then their mean fractions of episode time."""
+    secs = "/".join(na(result.get(f"time_{z}_s")) for z in ZONES)
+    return "n/a" if result.get("time_intimate_s") is None else \
+        f"{secs} ({'/'.join(na(result.get(f'{z}_fraction'), 3) for z in ZONES)})"
+
+
+def ttc_text(result: dict[str, Any]) -> str:
+    """Mean minimum time to collision over episodes on a collision course, and the share of such episodes."""
+    if result.get("collision_course_rate") is None:
+        return "n/a"
+    return f"{na(result.get('min_ttc_s'))} ({fmt(result['collision_course_rate'])} on a course)"
+
+
+SOCIAL_ROWS = (
+    ("time in intimate/personal/social zone, mean s (fraction)", zones_text),
+    ("group collision rate [95% CI]",
+     lambda r: measured_rate_text(r, "group_collision_rate", "group_collision_measured")),
+    ("path irregularity (rad)", lambda r: na(r.get("path_irregularity_rad"), 3)),
+    ("jerk (m/s^3)", lambda r: na(r.get("jerk_mps3"))),
+    ("min time to collision, mean s (share on a collision course)", ttc_text),
+    ("SPL", lambda r: na(r.get("spl"), 3)),
+)
 
 
 def describe_config(result: dict[str, Any]) -> str:
@@ -79,6 +115,7 @@ def markdown_table(result: dict[str, Any]) -> str:
         ("solve time p50 / p95 (ms)",
          f"{fmt(result['solve_time_p50_ms'], 1)} / {fmt(result['solve_time_p95_ms'], 1)}"),
         ("fallback rate", fmt(result["fallback_rate"], 3)),
+        *((name, f(result)) for name, f in SOCIAL_ROWS),
     ]
     lines = [f"**{result['policy']}** — {describe_config(result)}", "", "| metric | value |", "|---|---|"]
     lines += [f"| {name} | {value} |" for name, value in rows]
@@ -99,6 +136,12 @@ COMPARE_COLUMNS = (
     ("discomfort", lambda r: fmt(r["discomfort_frequency"], 3)),
     ("solve p50/p95 (ms)", lambda r: f"{fmt(r['solve_time_p50_ms'], 1)}/{fmt(r['solve_time_p95_ms'], 1)}"),
     ("fallback", lambda r: fmt(r["fallback_rate"], 3)),
+    ("zones s (frac.)", zones_text),
+    ("group coll.", lambda r: measured_rate_text(r, "group_collision_rate", "group_collision_measured")),
+    ("path irr. (rad)", lambda r: na(r.get("path_irregularity_rad"), 3)),
+    ("jerk (m/s^3)", lambda r: na(r.get("jerk_mps3"))),
+    ("min TTC (s)", ttc_text),
+    ("SPL", lambda r: na(r.get("spl"), 3)),
 )
 
 

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from envs.evaluation.records import AT_FAULT, EpisodeRecord, finite_or_none
+from envs.social_metrics import ZONES
 
 Z95 = 1.959963984540054  # two-sided 95% normal quantile
 ALPHA = 0.05
@@ -128,6 +129,31 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     out["fallbacks"] = int(sum(r.fallbacks for r in done))
     out["fallback_rate"] = out["fallbacks"] / out["plans"] if out["plans"] else None
     out["mean_return"] = _mean([r.ret for r in done])
+    out.update(social_summary(done))
+    return out
+
+
+def social_summary(done: Sequence[EpisodeRecord]) -> dict[str, Any]:
+    """The social-navigation metrics of completed episodes (`envs.social_metrics`), each over the episodes that
+    measured it (records written before these metrics hold None and are left out; None when none measured):
+    mean seconds and mean fraction of episode time per Hall zone; `group_collision_rate` with its Wilson interval
+    over episodes with group labels (`group_collision_measured` of them); mean path irregularity (rad) and jerk
+    (m/s^3); `collision_course_rate` (Wilson) and `min_ttc_s`, the mean of the per-episode minimum time to
+    collision over the episodes that were on a collision course; mean SPL (failures count 0)."""
+    def mean(key: str) -> float | None:
+        return _mean([v for r in done if (v := getattr(r, key)) is not None])
+
+    out: dict[str, Any] = {}
+    for zone in ZONES:
+        out[f"time_{zone}_s"], out[f"{zone}_fraction"] = mean(f"time_{zone}_s"), mean(f"{zone}_fraction")
+    measured = [r for r in done if r.group_collision is not None]
+    out["group_collision_measured"] = len(measured)
+    _rate(out, "group_collision_rate", sum(bool(r.group_collision) for r in measured), len(measured))
+    out["path_irregularity_rad"], out["jerk_mps3"] = mean("path_irregularity_rad"), mean("jerk_mps3")
+    course = [r for r in done if r.collision_course is not None]
+    _rate(out, "collision_course_rate", sum(bool(r.collision_course) for r in course), len(course))
+    out["min_ttc_s"] = _mean([r.min_ttc_s for r in course if r.collision_course and r.min_ttc_s is not None])
+    out["spl"] = mean("spl")
     return out
 
 
@@ -188,4 +214,4 @@ def paired_comparison(a: Sequence[EpisodeRecord], b: Sequence[EpisodeRecord], al
 
 
 __all__ = ["MIN_BOOTSTRAP_PAIRS", "aggregate", "finite_or_none", "mcnemar_exact", "min_discordant_pairs",
-           "paired_bootstrap", "paired_comparison", "wilson_interval"]
+           "paired_bootstrap", "paired_comparison", "social_summary", "wilson_interval"]
