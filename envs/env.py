@@ -367,8 +367,8 @@ class CrowdNavEnv(gym.Env):
         intruding = bool(intruded_groups(here, r + cfg.group_space_m, p.pos, p.radius, p.group_id,
                                          cfg.group_span_m, centre))
         dist_after = self._goal_distance()
-        social = social_step(before_pos, here, cfg.dt_s, r, centre, surface, p.group_id, before.pos[before.active],
-                             before.vel[before.active], before.radius[before.active])
+        social = social_step(before_pos, here, cfg.dt_s, r, centre, surface, p.group_id, before.pos, before.vel,
+                             before.radius, before.active)
         return StepFacts(dist_before, dist_after, dist_after < cfg.goal_tolerance_m, hit_wall, min_surface,
                          intruding, social)
 

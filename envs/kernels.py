@@ -1,5 +1,7 @@
 """The env's per-step work compiled with numba: the step's robot-pedestrian distances (`step_distances`), the
-group-intrusion test (`intruded_groups`) and the observation's arrays (`observation_arrays`).
+group-intrusion test (`intruded_groups`), the observation's arrays (`observation_arrays`) and the smallest time to
+collision of the social-navigation metrics (`min_time_to_collision`, the same floats as
+`envs.social_metrics.ttc_unchecked`).
 
 Each computes the same floats as the numpy code it replaced (`envs.geometry`, `envs.observation`; numpy's small
 matrix products are reproduced with `crowdsim.fma`), in one call instead of a dozen small array operations, so
@@ -249,3 +251,33 @@ def intruded_groups(robot: np.ndarray, reach_m: float, pos: np.ndarray, radius: 
                         np.ascontiguousarray(radius, dtype=float), np.ascontiguousarray(group_id, dtype=np.int64),
                         float(max_span_m) ** 2, float(max_span_m + reach_m + 0.5), np.ascontiguousarray(dist))
     return out.tolist() if ok else geometry.intruded_groups(robot, reach_m, pos, radius, group_id, max_span_m, dist)
+
+
+@numba.njit(cache=True)
+def _min_ttc(sx, sy, rvx, rvy, pos, vel, radius, active, robot_radius):
+    best = math.inf
+    for s in range(active.shape[0]):
+        if not active[s]:
+            continue
+        px, py = pos[s, 0] - sx, pos[s, 1] - sy
+        vx, vy = vel[s, 0] - rvx, vel[s, 1] - rvy
+        r = radius[s] + robot_radius
+        c = px * px + py * py - r * r
+        if c <= 0:
+            return 0.0
+        a = vx * vx + vy * vy
+        b = 2.0 * (px * vx + py * vy)
+        disc = b * b - 4.0 * a * c
+        if a > 0 and b < 0 and disc >= 0:
+            t = (-b - math.sqrt(max(disc, 0.0))) / (2.0 * a)
+            best = min(best, t)
+    return best
+
+
+def min_time_to_collision(start: np.ndarray, robot_vel: np.ndarray, pos: np.ndarray, vel: np.ndarray,
+                          radius: np.ndarray, active: np.ndarray, robot_radius: float) -> float:
+    """The smallest constant-velocity time to collision (s; 0 in contact, inf on no course) between the robot's disc
+    at `start` (2,) m moving at `robot_vel` (2,) m/s and the active rows of pos (S, 2) m, vel (S, 2) m/s, radius (S,)
+    m, active (S,) bool: `min(envs.social_metrics.ttc_unchecked(...))` over those rows, in one pass."""
+    return float(_min_ttc(float(start[0]), float(start[1]), float(robot_vel[0]), float(robot_vel[1]), pos, vel,
+                          radius, active, float(robot_radius)))

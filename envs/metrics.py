@@ -7,13 +7,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from envs.kernels import min_time_to_collision
 from envs.social_metrics import (
     ZONES,
     group_contact,
     mean_jerk,
     path_irregularity,
     spl,
-    ttc_unchecked,
     zone_of,
 )
 
@@ -149,14 +149,15 @@ class SocialStep:
 
 def social_step(start: np.ndarray, end: np.ndarray, dt_s: float, robot_radius_m: float, centre_m: np.ndarray,
                 surface_m: np.ndarray, group_id: np.ndarray, before_pos: np.ndarray, before_vel: np.ndarray,
-                before_radius: np.ndarray) -> SocialStep:
+                before_radius: np.ndarray, before_active: np.ndarray | None = None) -> SocialStep:
     """The env's step as `SocialStep`: start, end (2,) m the robot's positions; centre_m, surface_m (n,) m the
     distances to the n people present at the end (`envs.kernels.step_distances`, contacts that do not count
     already +inf), group_id (n,) their groups; before_pos (m, 2) m, before_vel (m, 2) m/s, before_radius (m,) m
-    the people present at the start."""
+    the crowd's rows at the start, of which the `before_active` (m,) bool ones are present (None: all)."""
     nearest = float(centre_m.min()) - robot_radius_m if len(centre_m) else math.inf
-    ttc = float(ttc_unchecked(before_pos - start, before_vel - (end - start) / dt_s,
-                              before_radius + robot_radius_m).min()) if len(before_pos) else math.inf
-    touching = len(surface_m) and bool((surface_m < 0.0).any())  # (a contact ends the episode: rare)
+    active = np.ones(len(before_pos), bool) if before_active is None else before_active
+    ttc = min_time_to_collision(start, (end - start) / dt_s, before_pos, before_vel, before_radius, active,
+                                robot_radius_m)
+    touching = len(surface_m) and bool(surface_m.min() < 0.0)  # (a contact ends the episode: rare)
     contact = touching and bool(group_contact(surface_m[None], np.asarray(group_id, int)[None])[0])
     return SocialStep(nearest, ttc, bool(contact))

@@ -133,3 +133,28 @@ def test_intrusion_kernel_finds_the_same_groups() -> None:
             left += not compiled  # a group standing on one point: handed to the numpy function
         hits += bool(want)
     assert hits > 200 and 0 < left < 250
+
+
+def test_min_time_to_collision_matches_the_numpy_metric_bit_for_bit() -> None:
+    """The env's per-step time to collision is the minimum of `envs.social_metrics.ttc_unchecked` over the present
+    rows, to the last bit: in contact, receding, approaching, absent rows (NaN positions) and nobody present."""
+    from envs.kernels import min_time_to_collision
+    from envs.social_metrics import ttc_unchecked
+
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        n = int(rng.integers(0, 12))
+        pos = rng.uniform(-6, 6, (n, 2))
+        vel = rng.uniform(-1.5, 1.5, (n, 2))
+        radius = rng.uniform(0.2, 0.4, n)
+        active = rng.random(n) < 0.8
+        pos[~active] = np.nan  # absent rows hold anything
+        start, robot_vel = rng.uniform(-1, 1, 2), rng.uniform(-1.2, 1.2, 2)
+        if trial % 7 == 0 and active.any():  # somebody on the robot
+            pos[np.flatnonzero(active)[0]] = start + 0.1
+        got = min_time_to_collision(start, robot_vel, pos, vel, radius, active, 0.3)
+        want = ttc_unchecked(pos[active] - start, vel[active] - robot_vel, radius[active] + 0.3)
+        assert got == (float(want.min()) if active.any() else np.inf)
+    head_on = min_time_to_collision(np.zeros(2), np.array([1.0, 0.0]), np.array([[3.0, 0.0]]), np.zeros((1, 2)),
+                                    np.array([0.3]), np.array([True]), 0.3)
+    assert head_on == pytest.approx(2.4)  # 3 m apart, closing at 1 m/s, touching at 0.6 m
