@@ -56,12 +56,13 @@ class OrcaCrowdConfig:
 
     human_radius_m: float = 0.3
     human_v_pref_mps: float = 1.0
-    neighbor_dist_m: float = 10.0
-    max_neighbors: int = 10
-    time_horizon_s: float = 5.0
-    time_horizon_obst_s: float = 5.0
-    safety_space_m: float = 0.0
-    time_step_s: float = 0.25
+    # ORCA's settings: `envs.rvo.OrcaParams` owns CrowdNav's values
+    neighbor_dist_m: float = OrcaParams.neighbor_dist_m
+    max_neighbors: int = OrcaParams.max_neighbors
+    time_horizon_s: float = OrcaParams.time_horizon_s
+    time_horizon_obst_s: float = OrcaParams.time_horizon_obst_s
+    safety_space_m: float = OrcaParams.safety_space_m
+    time_step_s: float = OrcaParams.time_step_s
     spawn_gap_m: float = 0.2
     robot_route: str = "fixed"
     route_min_m: float = 6.0
