@@ -162,11 +162,11 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
     if not replay:
         config.sim_config()  # validates the crowd settings before any worker starts
         if config.crowd_model != "social-force":
-            from envs.env import make_crowd
+            from envs.crowd_models import make_crowd
 
             make_crowd(config)  # a missing package (pyrvo) fails here
     else:
-        from envs.env import make_crowd
+        from envs.crowd_models import make_crowd
 
         make_crowd(config)  # reads and checks the recording now
     return config
@@ -189,7 +189,7 @@ def _group_notes(config: CrowdNavConfig) -> tuple[str, ...]:
     """The merges of overlapping groups in a replay's group file (`--group-overlaps merge`), one line each."""
     if config.replay is None or config.replay.groups_path is None or config.replay.group_overlaps != "merge":
         return ()
-    from envs.env import make_crowd
+    from envs.crowd_models import make_crowd
 
     return make_crowd(config).group_notes
 

@@ -4,12 +4,13 @@
     orca          CrowdNav's ORCA humans on a circle, for comparability with the CrowdNav literature
                   (`envs.orca_crowd.OrcaCrowd`; needs the optional package pyrvo)
 
-A replay (scenario "replay") is not a crowd model: the recording is the crowd.
+A replay (scenario "replay") is not a crowd model: the recording is the crowd. `make_crowd` builds either.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -42,3 +43,14 @@ def check_crowd_model(name: str, scenario: str) -> None:
     if name == "orca" and scenario not in ORCA_SCENARIOS:
         raise ValueError(f"crowd model 'orca' runs only scenario {', '.join(ORCA_SCENARIOS)} (ORCA here has no "
                          f"walls), not {scenario!r}")
+
+
+def make_crowd(cfg: CrowdNavConfig) -> Any:
+    """The env's `envs.crowd.Crowd` for a config: its crowd model, or a replayed file for scenario 'replay'."""
+    from envs.config import REPLAY_SCENARIO
+
+    if cfg.scenario == REPLAY_SCENARIO:
+        from envs.replay import ReplayCrowd
+
+        return ReplayCrowd(replace(cfg.replay, dt_s=cfg.dt_s))
+    return CROWD_MODELS[cfg.crowd_model](cfg)

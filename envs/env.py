@@ -25,9 +25,8 @@ from gymnasium import spaces
 
 from crowdsim import CrowdState
 from envs.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
-from envs.config import REPLAY_SCENARIO, CrowdNavConfig
-from envs.crowd import Crowd
-from envs.crowd_models import CROWD_MODELS
+from envs.config import CrowdNavConfig
+from envs.crowd_models import make_crowd
 from envs.frame import SceneFrame
 from envs.geometry import WallIndex
 from envs.history import PedHistory
@@ -39,16 +38,6 @@ from envs.rewards import StepFacts, reward_terms, weighted
 from envs.timing import DEFAULT_TIMING
 from envs.view import Decision, Pedestrians, PolicyView
 from planner import clip_control, model_dims, step_robot
-
-
-def make_crowd(cfg: CrowdNavConfig) -> Crowd:
-    """The crowd source for a config: its crowd model (`envs.crowd_models`), or a replayed file for scenario
-    'replay'."""
-    if cfg.scenario == REPLAY_SCENARIO:
-        from envs.replay import ReplayCrowd
-
-        return ReplayCrowd(replace(cfg.replay, dt_s=cfg.dt_s))
-    return CROWD_MODELS[cfg.crowd_model](cfg)
 
 
 class CrowdNavEnv(gym.Env):
