@@ -198,3 +198,15 @@ def test_a_suite_with_unknown_orca_fields_or_crowd_model_is_refused():
     suite = parse_suite({"name": "s", "version": 1, "defaults": {"dt_s": 0.05},
                          "cells": [{**cell, "robot": {"model": "holonomic"}}]})
     assert suite.cells[0].env_config(0).robot == replace(RobotConfig(), model="holonomic")
+
+
+@pytest.mark.parametrize("name", ["crowdnav-classic", "crowdnav-plusplus"])
+def test_each_crowdnav_setting_has_a_tuning_suite_with_the_same_episodes_rules_at_other_seeds(name: str) -> None:
+    """crowdnav-classic-tune / crowdnav-plusplus-tune: the reported cell's settings and defaults exactly, at seeds that
+    the reported suite never uses."""
+    reported, tune = load_suite(name), load_suite(f"{name}-tune")
+    (ref,), (cell,) = reported.cells, tune.cells
+    assert cell.defaults == ref.defaults
+    assert cell.spec | {"name": "", "seed0": 0, "episodes": 0} == ref.spec | {"name": "", "seed0": 0, "episodes": 0}
+    assert min(cell.seeds) > max(ref.seeds)
+    assert cell.env_config(cell.seeds[0]) == ref.env_config(cell.seeds[0])  # one seed, one episode, in either suite
