@@ -159,16 +159,12 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
 
         kw["observation"] = ObservationConfig(wall_rays=args.wall_rays)
     config = CrowdNavConfig(**kw)
+    from envs.crowd_models import DEFAULT_CROWD_MODEL, make_crowd
+
     if not replay:
         config.sim_config()  # validates the crowd settings before any worker starts
-        if config.crowd_model != "social-force":
-            from envs.crowd_models import make_crowd
-
-            make_crowd(config)  # a missing package (pyrvo) fails here
-    else:
-        from envs.crowd_models import make_crowd
-
-        make_crowd(config)  # reads and checks the recording now
+    if replay or config.crowd_model != DEFAULT_CROWD_MODEL:
+        make_crowd(config)  # reads and checks the recording, or fails on a missing package (pyrvo), now
     return config
 
 

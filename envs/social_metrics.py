@@ -141,12 +141,8 @@ def time_to_collision(rel_pos: np.ndarray, rel_vel: np.ndarray, radius_sum_m: np
     r = np.broadcast_to(np.asarray(radius_sum_m, dtype=float), p.shape[:-1])
     if not np.all(np.isfinite(r)) or np.any(r < 0):
         raise ValueError("radius_sum_m must be finite and >= 0")
-    return ttc_unchecked(p, v, r)
-
-
-def ttc_unchecked(p: np.ndarray, v: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """`time_to_collision` without the input checks (the env's per-step path, on arrays it already checked):
-    the smaller root of |p + t v|^2 = r^2 when the discs approach, 0 in contact, inf otherwise."""
+    # the smaller root of |p + t v|^2 = r^2 when the discs approach, 0 in contact, inf otherwise (the env's per-step
+    # minimum over people is `envs.kernels.min_time_to_collision`, the same floats)
     a = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
     b = 2.0 * (p[..., 0] * v[..., 0] + p[..., 1] * v[..., 1])
     c = p[..., 0] * p[..., 0] + p[..., 1] * p[..., 1] - r * r

@@ -136,10 +136,10 @@ def test_intrusion_kernel_finds_the_same_groups() -> None:
 
 
 def test_min_time_to_collision_matches_the_numpy_metric_bit_for_bit() -> None:
-    """The env's per-step time to collision is the minimum of `envs.social_metrics.ttc_unchecked` over the present
+    """The env's per-step time to collision is the minimum of `envs.social_metrics.time_to_collision` over the present
     rows, to the last bit: in contact, receding, approaching, absent rows (NaN positions) and nobody present."""
     from envs.kernels import min_time_to_collision
-    from envs.social_metrics import ttc_unchecked
+    from envs.social_metrics import time_to_collision
 
     rng = np.random.default_rng(3)
     for trial in range(300):
@@ -153,7 +153,7 @@ def test_min_time_to_collision_matches_the_numpy_metric_bit_for_bit() -> None:
         if trial % 7 == 0 and active.any():  # somebody on the robot
             pos[np.flatnonzero(active)[0]] = start + 0.1
         got = min_time_to_collision(start, robot_vel, pos, vel, radius, active, 0.3)
-        want = ttc_unchecked(pos[active] - start, vel[active] - robot_vel, radius[active] + 0.3)
+        want = time_to_collision(pos[active] - start, vel[active] - robot_vel, radius[active] + 0.3)
         assert got == (float(want.min()) if active.any() else np.inf)
     head_on = min_time_to_collision(np.zeros(2), np.array([1.0, 0.0]), np.array([[3.0, 0.0]]), np.zeros((1, 2)),
                                     np.array([0.3]), np.array([True]), 0.3)
