@@ -16,6 +16,7 @@ from predictor.checkpoint import load_model
 from predictor.device import model_device
 from predictor.ethucy import OBS_LEN, PRED_LEN, STEP_S  # the ETH/UCY protocol (one definition)
 from predictor.gaussian import mean_cov
+from predictor.group_rules import get_rule
 from predictor.model import GPGraph, check_group_mode, check_group_threshold_scale
 from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
 
@@ -123,13 +124,14 @@ class ConstantVelocityConfig:
 class ConstantVelocityPredictor:
     """Extrapolates the last observed velocity; samples perturb the velocity with isotropic noise.
 
-    Every pedestrian is its own group.
+    Every pedestrian is its own group, unless ``group_rule`` (a ``predictor.group_rules`` name) groups them.
     """
 
     step_s, obs_len, pred_len = STEP_S, OBS_LEN, PRED_LEN
 
-    def __init__(self, config: ConstantVelocityConfig | None = None) -> None:
+    def __init__(self, config: ConstantVelocityConfig | None = None, group_rule: str | None = None) -> None:
         self.config = config or ConstantVelocityConfig()
+        self.group_rule = get_rule(group_rule) if group_rule is not None else None
 
     def predict(
         self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | int | None = None
@@ -145,14 +147,35 @@ class ConstantVelocityPredictor:
         var = (steps[:, :, 0] * sigma) ** 2  # (12, 1)
         cov = np.zeros((PRED_LEN, h.shape[1], 2, 2))
         cov[..., 0, 0] = cov[..., 1, 1] = var
-        return Prediction(samples, mean, cov, np.arange(h.shape[1]))
+        groups = self.group_rule(h) if self.group_rule is not None else np.arange(h.shape[1])
+        return Prediction(samples, mean, cov, groups)
+
+
+RULE_SEPARATOR = "+"  # "NAME+RULE": predictor NAME grouping by rule RULE (predictor.group_rules)
+
+
+def split_group_rule(spec: str | Path) -> tuple[str, str | None]:
+    """("NAME", "RULE") for a spec "NAME+RULE" whose RULE is checked against ``GROUP_RULES`` (an unknown one
+    raises ValueError listing the valid names); (spec, None) without a "+" or for an existing file's path."""
+    text = str(spec)
+    base, sep, rule = text.rpartition(RULE_SEPARATOR)
+    if not sep or Path(text).exists():
+        return text, None
+    get_rule(rule)
+    return base, rule
 
 
 def load_predictor(
     name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None,
-    group_threshold_scale: float | None = None, group_mode: str | None = None,
+    group_threshold_scale: float | None = None, group_mode: str | None = None, group_rule: str | None = None,
 ) -> GPGraphPredictor | ConstantVelocityPredictor:
     """A predictor by packaged name ('gpgraph-stgcnn-hotel', 'constant-velocity') or checkpoint path.
+
+    ``group_rule`` (a ``predictor.group_rules.GROUP_RULES`` name, e.g. "coherent-motion") replaces the model's
+    learned hard group assignment at inference (``GPGraph.group_rule``; for constant velocity: groups its
+    pedestrians). A name "NAME+RULE" (e.g. "gpgraph-stgcnn-synthetic+coherent-motion") says the same in one string,
+    so that everything that takes a predictor name (the env, the benchmark's suites, ``crowdnav --predictor``)
+    can choose it; giving both is an error.
 
     ``backbone``/``grouping`` apply to checkpoint files (a published reference file defaults to
     backbone 'sgcn' with 'official' grouping). ``group_threshold_scale`` (finite, > 0) multiplies the learned
@@ -162,13 +185,19 @@ def load_predictor(
     inference; None keeps the checkpoint's, or the grouping it was trained with. Both are checked, then
     ignored, for constant velocity.
     """
-    if str(name_or_path) in CONSTANT_VELOCITY_NAMES:  # load_model checks the options for every other name
+    name, spec_rule = split_group_rule(name_or_path)
+    if spec_rule is not None:
+        if group_rule is not None:
+            raise ValueError(f"predictor {str(name_or_path)!r} names a group rule and group_rule={group_rule!r} "
+                             "names another: give one")
+        group_rule = spec_rule
+    if name in CONSTANT_VELOCITY_NAMES:  # load_model checks the options for every other name
         if group_threshold_scale is not None:
             check_group_threshold_scale(group_threshold_scale)
         check_group_mode(group_mode)
-        return ConstantVelocityPredictor()
-    model, _ = load_model(name_or_path, backbone=backbone, grouping=grouping,
-                          group_threshold_scale=group_threshold_scale, group_mode=group_mode)
+        return ConstantVelocityPredictor(group_rule=group_rule)
+    model, _ = load_model(name if spec_rule is not None else name_or_path, backbone=backbone, grouping=grouping,
+                          group_threshold_scale=group_threshold_scale, group_mode=group_mode, group_rule=group_rule)
     return GPGraphPredictor(model)
 
 

@@ -27,6 +27,7 @@ from safetensors.torch import save_file
 from predictor.backbones import BACKBONES
 from predictor.checkpoints import PACKAGE_CHECKPOINTS, checkpoint_file
 from predictor.files import write_atomic
+from predictor.group_rules import get_rule
 from predictor.model import GPGraph, GPGraphConfig, check_group_mode, check_group_threshold_scale
 
 FORMAT = "predictor.gpgraph/1"
@@ -118,7 +119,7 @@ def resolve(name_or_path: str | Path) -> Path:
 
 def load_model(
     name_or_path: str | Path, backbone: str | None = None, grouping: str | None = None,
-    group_threshold_scale: float | None = None, group_mode: str | None = None,
+    group_threshold_scale: float | None = None, group_mode: str | None = None, group_rule: str | None = None,
 ) -> tuple[GPGraph, dict]:
     """Build a model from a checkpoint (ours or the authors'); returns (model in eval mode, meta).
 
@@ -127,10 +128,13 @@ def load_model(
     The model's ``group_threshold_scale`` is ``group_threshold_scale`` when given (finite, > 0), else the
     meta's ``"group_threshold_scale"`` when the file has one, else 1.0; likewise its ``group_mode`` is
     ``group_mode`` when given, else the meta's ``"group_mode"``, else None (the config's grouping).
+    ``group_rule`` (a ``predictor.group_rules`` name) replaces the learned hard assignment at inference.
     """
     if group_threshold_scale is not None:
         group_threshold_scale = check_group_threshold_scale(group_threshold_scale)
     check_group_mode(group_mode)
+    if group_rule is not None:
+        get_rule(group_rule)  # before anything is read
     path = resolve(name_or_path)
     obj = read_file(path)
     if is_reference_state(obj):
@@ -153,6 +157,7 @@ def load_model(
         group_mode = _from_meta(meta, META_GROUP_MODE, None, check_group_mode, path)
     model.group_threshold_scale = group_threshold_scale
     model.group_mode = group_mode
+    model.group_rule = group_rule
     return model.eval(), meta
 
 

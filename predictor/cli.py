@@ -12,6 +12,8 @@ Examples::
         --group-threshold-scale 0.8
     gpgraph evaluate --checkpoint gpgraph-stgcnn-synthetic --data out/synthetic_predictor/data --group-mode average
     gpgraph predict --checkpoint gpgraph-stgcnn-hotel --history out/hist.npy --out out/pred.npz
+    gpgraph groups --groups ../shared/datasets/eth_ucy_groups --group-overlaps merge --absent-ids drop \
+        --predictor gpgraph-stgcnn-synthetic --predictor 'gpgraph-stgcnn-{scene}+coherent-motion'
 """
 
 from __future__ import annotations
@@ -29,8 +31,10 @@ import torch
 from predictor.checkpoint import CheckpointError, load_model
 from predictor.data import DataFormatError
 from predictor.device import DEVICES, resolve_device
+from predictor.ethucy import DEFAULT_DATA_DIR, GROUP_OVERLAPS
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.files import write_atomic
+from predictor.group_validation import ABSENT_IDS
 from predictor.grouping import THRESHOLD_MODES
 from predictor.model import ASSIGNERS, GPGraph, GPGraphConfig, check_group_threshold_scale
 from predictor.sampling import PROTOCOLS
@@ -128,6 +132,45 @@ def cmd_predict(args: argparse.Namespace) -> int:
             np.savez(fh, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
     write_atomic(out, write)
     print(f"wrote {out}: samples {pred.samples.shape}, groups {pred.group_id.tolist()}")
+    return 0
+
+
+GROUP_TABLE_KEYS = ("pw_precision", "pw_recall", "pw_f1", "gmitre_precision", "gmitre_recall", "gmitre_f1")
+
+
+def cmd_groups(args: argparse.Namespace) -> int:
+    """PW / G-MITRE of each --predictor's groups on every window of the annotated recordings (validation)."""
+    from predictor.api import load_predictor
+    from predictor.group_validation import read_annotations, validate
+
+    if args.json:
+        _check_output_file(args.json, ".json")
+    recordings = read_annotations(args.data, args.groups, args.group_overlaps, args.absent_ids)
+    for rec in recordings:
+        for note in rec.notes:
+            print(f"note: {note}", file=sys.stderr)
+    loaded: dict[str, Any] = {}
+
+    def groups_for(rec: Any) -> Any:
+        name = spec.replace("{scene}", rec.scene)
+        predictor = loaded.get(name) or loaded.setdefault(name, load_predictor(name))
+        return lambda w: predictor.predict(w.obs, n_samples=1, rng=0).group_id
+
+    results = {}
+    for spec in args.predictor:
+        load_predictor(spec.replace("{scene}", recordings[0].scene))  # a bad name fails before any scoring
+    print(f"{'predictor':<44} {'recording':<14} {'windows':>7} " + " ".join(f"{k:>16}" for k in GROUP_TABLE_KEYS))
+    for spec in args.predictor:
+        results[spec] = validate(recordings, groups_for)
+        for rec_name, r in results[spec].items():
+            cells = " ".join(f"{r[k]:>16.3f}" for k in GROUP_TABLE_KEYS)
+            print(f"{spec:<44} {rec_name:<14} {r['windows']:>7} {cells}")
+    if args.json:
+        payload = {"data": str(args.data), "groups": str(args.groups), "group_overlaps": args.group_overlaps,
+                   "absent_ids": args.absent_ids, "notes": [n for r in recordings for n in r.notes],
+                   "results": results}
+        text = json.dumps(payload, indent=2, allow_nan=True) + "\n"
+        write_atomic(args.json, lambda tmp: Path(tmp).write_text(text))
     return 0
 
 
@@ -284,6 +327,22 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
     _group_calibration(r)
     r.set_defaults(func=cmd_predict)
+    g = sub.add_parser("groups", help="grouping on real annotated people (validation): PW and G-MITRE of each "
+                       "predictor's groups on every window of the recordings that GROUPS annotates")
+    g.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    g.add_argument("--data", type=Path, default=DEFAULT_DATA_DIR,
+                   help="ETH/UCY data; the recording X.txt of GROUPS/X.groups.txt is DATA/*/test/X.txt")
+    g.add_argument("--groups", type=Path, required=True, help="folder of X.groups.txt annotations")
+    g.add_argument("--predictor", action="append", required=True, metavar="NAME",
+                   help="predictor name or checkpoint, repeatable; '{scene}' becomes each recording's scene "
+                        "(e.g. gpgraph-stgcnn-{scene}, its leave-one-out model); NAME+RULE groups by a rule of "
+                        "predictor.group_rules (constant-velocity+RULE: the rule alone)")
+    g.add_argument("--group-overlaps", choices=GROUP_OVERLAPS, default="error",
+                   help="a pedestrian listed on two lines: error, or merge those groups (each merge noted)")
+    g.add_argument("--absent-ids", choices=ABSENT_IDS, default="error",
+                   help="a listed pedestrian the recording lacks: error, or drop it (noted)")
+    g.add_argument("--json", type=Path, default=None)
+    g.set_defaults(func=cmd_groups)
     ls = sub.add_parser("list", help="the packaged predictors, one a line: the name (usable wherever a checkpoint "
                         "is asked for) and what it is (model, grouping, training data, validation loss, role)")
     ls.set_defaults(func=cmd_list)
@@ -301,7 +360,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     torch.set_num_threads(args.threads)
     try:
-        args.device = resolve_device(args.device)  # before anything is read or written
+        if hasattr(args, "device"):  # groups runs on the CPU
+            args.device = resolve_device(args.device)  # before anything is read or written
     except ValueError as exc:
         print(f"gpgraph: error: {exc}", file=sys.stderr)
         return 2

@@ -18,6 +18,7 @@ from torch import Tensor, nn
 
 from predictor import grouping
 from predictor.backbones import Backbone, check_backbone, make_backbone
+from predictor.group_rules import apply_rule, get_rule
 from predictor.pair_assigner import PairwiseAssigner
 
 INTEGRATIONS = ("mlp", "mean")
@@ -181,14 +182,19 @@ class GPGraph(nn.Module):
     (average-linkage clustering of D cut at the threshold, which does not chain people through intermediate
     neighbours) exists only as this override. Like the scale it is an inference-time setting outside
     ``config`` (training builds its model with the default None), and checkpoints may carry it in their meta.
+
+    ``group_rule`` (default None: the learned assignment) replaces the hard assignment at inference by a
+    registered rule of ``predictor.group_rules`` on the observed positions (e.g. "coherent-motion"); the scale
+    and the mode then do not apply. Without the group branches it has no effect.
     """
 
     def __init__(self, config: GPGraphConfig | None = None, group_threshold_scale: float = 1.0,
-                 group_mode: str | None = None) -> None:
+                 group_mode: str | None = None, group_rule: str | None = None) -> None:
         super().__init__()
         self.config = config or GPGraphConfig()
         self.group_threshold_scale = group_threshold_scale
         self.group_mode = group_mode
+        self.group_rule = group_rule
         n_branches = sum(self.config.branches)
         n_backbones = 1 if self.config.weight_share else n_branches
         self.backbones = nn.ModuleList(make_backbone(self.config.backbone) for _ in range(n_backbones))
@@ -215,18 +221,34 @@ class GPGraph(nn.Module):
         self._group_mode = check_group_mode(value)
 
     @property
+    def group_rule(self) -> str | None:
+        """Inference override of the hard assignment by a rule (``predictor.group_rules.GROUP_RULES``), or None."""
+        return self._group_rule
+
+    @group_rule.setter
+    def group_rule(self, value: str | None) -> None:
+        if value is not None:
+            get_rule(value)  # an unknown name raises, listing the valid ones
+        self._group_rule = value
+
+    @property
     def effective_group_mode(self) -> str:
         """The grouping the hard assignment uses: ``group_mode``, else ``config.grouping``."""
         return self.config.grouping if self._group_mode is None else self._group_mode
 
     def assign(self, obs_abs: Tensor, node_mask: Tensor) -> tuple[Tensor, Tensor]:
-        """Pair distances D (B, N, N) and group labels (B, N) (``effective_group_mode`` at pi * scale)."""
+        """Pair distances D (B, N, N) and group labels (B, N) (``group_rule``, else ``effective_group_mode`` at
+        pi * scale)."""
         dist = self.assigner(obs_abs)
         pi = self.assigner.threshold
         mode = self.effective_group_mode
         with torch.no_grad():
             if not self.config.uses_groups:  # backbone alone: every pedestrian is its own group
                 labels = torch.arange(dist.shape[1], device=dist.device).expand(dist.shape[0], -1).clone()
+            elif self._group_rule is not None:
+                rule = get_rule(self._group_rule)
+                labels = torch.from_numpy(apply_rule(rule, obs_abs.detach().double().cpu().numpy(),
+                                                     node_mask.detach().cpu().numpy())).to(dist.device)
             elif mode == "ratio":
                 labels = grouping.ratio_groups(dist, node_mask, self.config.group_ratio)
             else:

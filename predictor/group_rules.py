@@ -1,0 +1,153 @@
+"""Group assignment rules: who walks together, from the observed positions alone (numpy and scipy, no weights).
+
+A rule maps one window's observed positions ``obs`` (T, N, 2), metres at ``step_s`` apart, to group ids (N,)
+0..G-1, numbered by first member. Rules stand beside the learned assigners of GP-Graph: ``load_predictor`` takes
+``group_rule`` (or a name ``PREDICTOR+RULE``) and then replaces the model's hard group assignment by the rule's
+at inference (``GPGraph.group_rule``), so the group pooling, the intra-group graph and the group-level latent
+sampling all follow the rule. They are chosen on the real UCY group annotations (validation only; see RESULTS.md,
+"sim-to-real", and ``gpgraph groups``), because the assigner trained on crowdsim does not transfer to real people.
+
+Rules:
+
+* `CoherentMotionRule` ("coherent-motion"): pair cost c_ij = mean_t |p_i - p_j| / distance_m
+  + mean_t |v_i - v_j| / rel_speed_mps (velocities from consecutive positions), clustered by average linkage
+  (UPGMA) cut at 1: a group's members are on average close and moving alike, and one close neighbour does not
+  chain two groups together as connected components would.
+* `ProximityRule` ("proximity-last", "proximity-max"): connected components of the pairs closer than
+  ``radius_m`` at the last observed step, or at every observed step (the distance rules of the literature).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from scipy.cluster.hierarchy import fcluster, linkage
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.distance import squareform
+
+LINKAGES = ("average", "complete", "single")
+STEPS = ("last", "max", "mean")
+
+
+class GroupRule(Protocol):
+    """obs (T, N, 2) m -> group ids (N,) int64, 0..G-1 numbered by first member."""
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+def _check_obs(obs: np.ndarray) -> np.ndarray:
+    o = np.asarray(obs, dtype=np.float64)
+    if o.ndim != 3 or o.shape[2] != 2 or o.shape[0] < 2:
+        raise ValueError(f"obs must have shape (T >= 2, N, 2) in metres, got {o.shape}")
+    if not np.all(np.isfinite(o)):
+        raise ValueError("obs contains NaN or inf")
+    return o
+
+
+def first_member_order(labels: np.ndarray) -> np.ndarray:
+    """Relabel (N,) cluster ids 0..G-1 in order of each cluster's first member."""
+    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))
+    return rank[inverse.reshape(-1)]
+
+
+def pair_distances(obs: np.ndarray) -> np.ndarray:
+    """(T, N, N) distance of every pair at every observed step, m."""
+    return np.linalg.norm(obs[:, :, None] - obs[:, None], axis=-1)
+
+
+@dataclass(frozen=True)
+class CoherentMotionRule:
+    """Average-linkage clusters of c_ij = mean distance / distance_m + mean relative speed / rel_speed_mps, cut at 1.
+
+    distance_m: the mean distance (m) at which a pair moving identically stops being a group.
+    rel_speed_mps: the mean relative speed (m/s) at which a pair at zero distance stops being a group.
+    linkage: how cluster costs combine ("average": UPGMA; "single": connected components of c <= 1).
+    step_s: time between observed positions, s (0.4: the ETH/UCY protocol).
+    """
+
+    distance_m: float = 2.0
+    rel_speed_mps: float = 0.8
+    linkage: str = "average"
+    step_s: float = 0.4
+
+    def __post_init__(self) -> None:
+        for name in ("distance_m", "rel_speed_mps", "step_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+        if self.linkage not in LINKAGES:
+            raise ValueError(f"unknown linkage {self.linkage!r}; valid: {', '.join(LINKAGES)}")
+
+    def cost(self, obs: np.ndarray) -> np.ndarray:
+        """(N, N) pair cost c_ij (dimensionless, symmetric, zero diagonal) of obs (T, N, 2) m."""
+        o = _check_obs(obs)
+        vel = np.diff(o, axis=0) / self.step_s  # (T-1, N, 2) m/s
+        rel_speed = np.linalg.norm(vel[:, :, None] - vel[:, None], axis=-1).mean(axis=0)
+        return pair_distances(o).mean(axis=0) / self.distance_m + rel_speed / self.rel_speed_mps
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        c = self.cost(obs)
+        n = c.shape[0]
+        if n == 1:
+            return np.zeros(1, dtype=np.int64)
+        if self.linkage == "single":
+            return first_member_order(connected_components(c <= 1.0, directed=False)[1])
+        tree = linkage(squareform(c, checks=False), method=self.linkage)
+        return first_member_order(fcluster(tree, t=1.0, criterion="distance"))
+
+
+@dataclass(frozen=True)
+class ProximityRule:
+    """Connected components of the pairs closer than radius_m at the last observed step ("last"), at every one
+    ("max": the largest distance over the window), or on average ("mean").
+
+    radius_m: link distance, m. steps: one of ``STEPS``.
+    """
+
+    radius_m: float = 1.25
+    steps: str = "max"
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.radius_m, int | float) and np.isfinite(self.radius_m) and self.radius_m > 0):
+            raise ValueError(f"radius_m must be a finite number > 0, got {self.radius_m!r}")
+        if self.steps not in STEPS:
+            raise ValueError(f"unknown steps {self.steps!r}; valid: {', '.join(STEPS)}")
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        d = pair_distances(_check_obs(obs))
+        d = {"last": d[-1], "max": d.max(axis=0), "mean": d.mean(axis=0)}[self.steps]
+        return first_member_order(connected_components(d < self.radius_m, directed=False)[1])
+
+
+# The registry: each rule's settings were chosen on the UCY group annotations (validation; RESULTS.md "sim-to-real").
+GROUP_RULES: dict[str, GroupRule] = {
+    "coherent-motion": CoherentMotionRule(),
+    "proximity-max": ProximityRule(radius_m=1.25, steps="max"),
+    "proximity-last": ProximityRule(radius_m=1.0, steps="last"),
+}
+
+
+def get_rule(name: str) -> GroupRule:
+    """The registered rule ``name``; an unknown name raises ValueError listing the valid ones."""
+    try:
+        return GROUP_RULES[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown group rule {name!r}; valid: {', '.join(GROUP_RULES)}") from None
+
+
+def apply_rule(rule: GroupRule, obs: np.ndarray, node_mask: np.ndarray) -> np.ndarray:
+    """Batched: labels (B, N) for obs (B, T, N, 2) m with real pedestrians ``node_mask`` (B, N) first in each
+    window; padding gets G_b, G_b + 1, ... (its own groups), as ``predictor.grouping`` lays batches out."""
+    b, _, n, _ = obs.shape
+    out = np.zeros((b, n), dtype=np.int64)
+    for i in range(b):
+        k = int(node_mask[i].sum())
+        lab = rule(obs[i, :, :k]) if k else np.zeros(0, dtype=np.int64)
+        g = int(lab.max()) + 1 if k else 0
+        out[i, :k] = lab
+        out[i, k:] = g + np.arange(n - k)
+    return out
