@@ -34,6 +34,7 @@ from predictor.device import DEVICES, resolve_device
 from predictor.ethucy import DEFAULT_DATA_DIR, GROUP_OVERLAPS
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.files import write_atomic
+from predictor.group_rules import GROUP_RULES
 from predictor.group_validation import ABSENT_IDS
 from predictor.grouping import THRESHOLD_MODES
 from predictor.model import ASSIGNERS, GPGraph, GPGraphConfig, check_group_threshold_scale
@@ -98,7 +99,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.json:
         _check_output_file(args.json, ".json")
     model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping,
-                          group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode)
+                          group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode,
+                          group_rule=args.group_rule)
     windows = _windows(args.data, args.split)
     cfg = EvalConfig(protocol=args.protocol, seed=args.seed, trials=args.trials, n_samples=args.samples,
                      pool_size=args.pool_size)
@@ -107,6 +109,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     result["grouping"] = model.config.grouping
     result["group_threshold_scale"] = model.group_threshold_scale
     result["group_mode"] = model.effective_group_mode
+    result["group_rule"] = model.group_rule
     result["split"] = args.split
     print(format_table(result))
     if args.json:
@@ -122,7 +125,8 @@ def cmd_predict(args: argparse.Namespace) -> int:
     out = _check_output_file(args.out, ".npz")
     history = _load_history(args.history)
     model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping,
-                          group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode)
+                          group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode,
+                          group_rule=args.group_rule)
     model = model.to(args.device)
     if args.sample_level:
         model.config = replace(model.config, sample_level=args.sample_level)
@@ -239,6 +243,9 @@ def _group_calibration(p: argparse.ArgumentParser) -> None:
                    help=f"hard grouping at inference, one of {', '.join(THRESHOLD_MODES)} ('average': average-"
                         "linkage clustering of the learned distances cut at the threshold); None: the "
                         "checkpoint's, else the grouping it was trained with")
+    p.add_argument("--group-rule", choices=tuple(GROUP_RULES), default=None, metavar="NAME",
+                   help=f"replace the learned hard grouping by a rule on the observed positions, one of "
+                        f"{', '.join(GROUP_RULES)} (predictor.group_rules); None: the learned grouping")
 
 
 def _common(p: argparse.ArgumentParser) -> None:
