@@ -36,13 +36,13 @@ def test_coherent_motion_groups_walkers_together_not_passers_by() -> None:
 
 
 def test_average_linkage_does_not_chain_through_one_neighbour() -> None:
-    # a line of people 1.2 m apart, all standing: each adjacent pair costs 0.6, the ends are 3.6 m apart
+    # a line of people 1.2 m apart, all standing: each adjacent pair costs 0.8, the ends are 3.6 m apart
     obs = scene(*(walk((x, 0.0), (0, 0)) for x in (0.0, 1.2, 2.4, 3.6)))
     chained = CoherentMotionRule(linkage="single")(obs)
     average = CoherentMotionRule()(obs)
     assert len(set(chained.tolist())) == 1  # single linkage: one group through the neighbours
-    assert average.tolist() == [0, 0, 1, 1]  # average linkage: the two pairs' mean cost is 1.2, above 1
-    assert CoherentMotionRule().cost(obs)[0, 3] == pytest.approx(3.6 / 2.0)
+    assert average.tolist() == [0, 0, 1, 1]  # average linkage: the two pairs' mean cost is 1.6, above 1
+    assert CoherentMotionRule().cost(obs)[0, 3] == pytest.approx(3.6 / 1.5)
 
 
 @pytest.mark.parametrize("name", list(GROUP_RULES))
@@ -172,5 +172,5 @@ def test_the_shipped_rule_groups_real_people_better_than_the_crowdsim_assigner()
     rule = summary(score_windows(rec.windows, lambda w: get_rule("coherent-motion")(w.obs)))
     learned = load_predictor("gpgraph-stgcnn-synthetic")
     model = summary(score_windows(rec.windows, lambda w: learned.predict(w.obs, n_samples=1, rng=0).group_id))
-    assert rule["pw_f1"] == pytest.approx(0.871, abs=0.002) and rule["gmitre_f1"] == pytest.approx(0.928, abs=0.002)
+    assert rule["pw_f1"] == pytest.approx(0.832, abs=0.002) and rule["gmitre_f1"] == pytest.approx(0.916, abs=0.002)
     assert rule["pw_f1"] > model["pw_f1"] + 0.2 and rule["gmitre_f1"] > model["gmitre_f1"] + 0.2
