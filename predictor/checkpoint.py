@@ -26,6 +26,7 @@ from safetensors.torch import save_file
 
 from predictor.backbones import BACKBONES
 from predictor.checkpoints import PACKAGE_CHECKPOINTS, checkpoint_file
+from predictor.ethucy import STEP_S
 from predictor.files import write_atomic
 from predictor.group_rules import get_rule
 from predictor.model import GPGraph, GPGraphConfig, check_group_mode, check_group_threshold_scale
@@ -33,6 +34,9 @@ from predictor.model import GPGraph, GPGraphConfig, check_group_mode, check_grou
 FORMAT = "predictor.gpgraph/1"
 META_GROUP_THRESHOLD_SCALE = "group_threshold_scale"  # optional meta key, see the module docstring
 META_GROUP_MODE = "group_mode"  # optional meta key, see the module docstring
+# The time between the positions a model was trained on, s (written by `gpgraph train`; a file without it was trained
+# on the ETH/UCY protocol's 0.4 s, as every packaged one). load_model refuses any other: the API serves STEP_S.
+META_STEP_S = "step_s"
 
 
 class CheckpointError(ValueError):
@@ -149,6 +153,10 @@ def load_model(
         cfg, state, meta = GPGraphConfig.from_dict(d), obj["state_dict"], dict(obj.get("meta", {}))
     else:
         raise CheckpointError(f"{path} is neither a predictor checkpoint nor a reference GP-Graph state_dict")
+    step = meta.get(META_STEP_S, STEP_S)
+    if not isinstance(step, int | float) or abs(float(step) - STEP_S) > 1e-9:
+        raise CheckpointError(f"checkpoint {path} was trained on positions {step!r} s apart; the predictor serves the "
+                              f"ETH/UCY protocol's {STEP_S} s (8 observed, 12 predicted steps)")
     model = GPGraph(cfg)
     load_state(model, state, str(path))
     if group_threshold_scale is None:
@@ -205,10 +213,10 @@ def save_atomic(obj: dict, path: str | Path) -> None:
 
 def save_model(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
     """Save a model with its config inside (atomic); ``meta`` gains the model's calibration
-    (``meta_with_calibration``)."""
+    (``meta_with_calibration``) and, unless it has one, the step it serves (``step_s``: STEP_S)."""
     save_atomic(
         {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
-         "meta": meta_with_calibration(model, meta)},
+         "meta": {META_STEP_S: STEP_S} | meta_with_calibration(model, meta)},
         path,
     )
 

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from predictor.checkpoint import CheckpointError, load_model
-from predictor.data import DataFormatError
+from predictor.data import DataFormatError, check_data_step
 from predictor.device import DEVICES, resolve_device
 from predictor.ethucy import DEFAULT_DATA_DIR, GROUP_OVERLAPS
 from predictor.evaluate import EvalConfig, evaluate
@@ -71,6 +71,8 @@ def cmd_train(args: argparse.Namespace) -> int:
                       seed=args.seed, eval_every=args.eval_every, init=args.init, model=model_cfg)
     if args.init:  # a missing, corrupt or mismatched checkpoint is reported before any data is read
         initial_weights(GPGraph(model_cfg), args.init)
+    for split in ("train", "val"):
+        check_data_step(split_folder(args.data, split))
     train_w = _windows(args.data, "train")[: args.max_windows or None]
     val_w = _windows(args.data, "val")[: args.max_windows or None]
     labelled = sum(w.group_id is not None for w in train_w)

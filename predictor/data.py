@@ -9,16 +9,18 @@ precedence over the group file.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from predictor.ethucy import DataFormatError, read_groups, read_labels, read_trajectories
+from predictor.ethucy import STEP_S, DataFormatError, read_groups, read_labels, read_trajectories
 
 __all__ = [
     "DataFormatError",
     "Recording",
+    "check_data_step",
     "group_file_for",
     "list_trajectory_files",
     "read_group_file",
@@ -80,6 +82,23 @@ def list_trajectory_files(folder: str | Path) -> list[Path]:
     if not folder.is_dir():
         raise FileNotFoundError(f"no such data folder: {folder}")
     return sorted(p for p in folder.glob("*.txt") if not p.name.endswith(GROUP_SUFFIX))
+
+
+def check_data_step(folder: str | Path) -> None:
+    """Refuse (DataFormatError) a folder whose crowdsim metadata (``X.json`` beside ``X.txt``) records positions
+    another ``record_dt_s`` than the protocol's STEP_S apart: a model trained on them would be served at 0.4 s.
+    Files without metadata (ETH/UCY) are taken to follow the protocol."""
+    for path in list_trajectory_files(folder):
+        meta = path.with_suffix(".json")
+        if not meta.is_file():
+            continue
+        try:
+            step = json.loads(meta.read_text()).get("record_dt_s", STEP_S)
+        except (ValueError, AttributeError):
+            raise DataFormatError(f"{meta}: not a JSON object (crowdsim metadata)") from None
+        if not isinstance(step, int | float) or abs(float(step) - STEP_S) > 1e-9:
+            raise DataFormatError(f"{path}: recorded every {step!r} s ({meta.name}); the predictor is trained and "
+                                  f"served on the ETH/UCY protocol's {STEP_S} s steps (SimConfig.record_dt_s)")
 
 
 def read_split(folder: str | Path) -> list[Recording]:

@@ -187,3 +187,29 @@ def test_train_init_starts_from_the_checkpoint_and_records_it(synthetic_data: Pa
                   "--init", "gpgraph-stgcnn-synthetic") == 0
     _, meta = load_model(out / "best.pt")
     assert meta["train"]["init"] == "gpgraph-stgcnn-synthetic"
+
+
+def test_data_and_checkpoints_of_another_step_are_refused(synthetic_data: Path, tmp_path: Path, capsys) -> None:
+    """A model is trained and served on the ETH/UCY protocol's 0.4 s steps: crowdsim data recorded at 0.2 s
+    is refused before training, and a checkpoint that says it was trained at 0.2 s is refused on loading."""
+    import shutil
+
+    from predictor.checkpoint import CheckpointError, load_model, save_model
+
+    data = tmp_path / "data"
+    shutil.copytree(synthetic_data, data)
+    first = next(p for p in sorted((data / "val").glob("*.txt")) if not p.name.endswith(".groups.txt"))
+    first.with_suffix(".json").write_text(json.dumps({"record_dt_s": 0.2}))
+    out = tmp_path / "run"
+    capsys.readouterr()
+    assert _train(data, out, 1) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "recorded every 0.2 s" in err and not out.exists()
+    ckpt = tmp_path / "m.pt"
+    save_model(GPGraph(GPGraphConfig(backbone="stgcnn")), ckpt)
+    assert read_file(ckpt)["meta"]["step_s"] == 0.4  # what training writes
+    save_model(GPGraph(GPGraphConfig(backbone="stgcnn")), ckpt, meta={"step_s": 0.2})
+    with pytest.raises(CheckpointError, match=r"0\.2 s apart"):
+        load_model(ckpt)
+    assert main(["evaluate", "--checkpoint", str(ckpt), "--data", str(synthetic_data), "--trials", "1"]) == 2
+    assert "trained on positions 0.2 s apart" in capsys.readouterr().err
