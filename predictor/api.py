@@ -16,7 +16,7 @@ from predictor.checkpoint import load_model
 from predictor.device import model_device
 from predictor.ethucy import OBS_LEN, PRED_LEN, STEP_S  # the ETH/UCY protocol (one definition)
 from predictor.gaussian import mean_cov
-from predictor.group_rules import get_rule
+from predictor.group_rules import get_rule, split_group_rule
 from predictor.model import GPGraph, check_group_mode, check_group_threshold_scale
 from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
 
@@ -149,20 +149,6 @@ class ConstantVelocityPredictor:
         cov[..., 0, 0] = cov[..., 1, 1] = var
         groups = self.group_rule(h) if self.group_rule is not None else np.arange(h.shape[1])
         return Prediction(samples, mean, cov, groups)
-
-
-RULE_SEPARATOR = "+"  # "NAME+RULE": predictor NAME grouping by rule RULE (predictor.group_rules)
-
-
-def split_group_rule(spec: str | Path) -> tuple[str, str | None]:
-    """("NAME", "RULE") for a spec "NAME+RULE" whose RULE is checked against ``GROUP_RULES`` (an unknown one
-    raises ValueError listing the valid names); (spec, None) without a "+" or for an existing file's path."""
-    text = str(spec)
-    base, sep, rule = text.rpartition(RULE_SEPARATOR)
-    if not sep or Path(text).exists():
-        return text, None
-    get_rule(rule)
-    return base, rule
 
 
 def load_predictor(

@@ -15,9 +15,10 @@ from typing import Any
 from predictor.checkpoints import PACKAGE_CHECKPOINTS
 
 # Roles that live outside the checkpoint (who loads it by default). The only names of other packages' settings in
-# predictor; tests/predictor/test_catalog.py checks them against envs.config.DEFAULT_PREDICTOR.
+# predictor; tests/predictor/test_catalog.py checks them against envs.config.DEFAULT_PREDICTOR (NAME+RULE).
 ROLES = {
-    "gpgraph-stgcnn-synthetic": "role: the default predictor of mpc-gpgraph (and of every crowdnav policy that "
+    "gpgraph-stgcnn-synthetic": "role: grouping by the coherent-motion rule (gpgraph-stgcnn-synthetic+coherent-"
+                                "motion), the default predictor of mpc-gpgraph (and of every crowdnav policy that "
                                 "predicts)",
     "gpgraph-stgcnn-synthetic-conv": "role: the previous default (GP-Graph's own assigner), kept for comparison",
 }

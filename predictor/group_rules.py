@@ -20,6 +20,7 @@ Rules:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
@@ -152,3 +153,17 @@ def apply_rule(rule: GroupRule, obs: np.ndarray, node_mask: np.ndarray) -> np.nd
         out[i, :k] = lab
         out[i, k:] = g + np.arange(n - k)
     return out
+
+
+RULE_SEPARATOR = "+"  # "NAME+RULE": predictor NAME grouping by rule RULE (predictor.group_rules)
+
+
+def split_group_rule(spec: str | Path) -> tuple[str, str | None]:
+    """("NAME", "RULE") for a spec "NAME+RULE" whose RULE is checked against ``GROUP_RULES`` (an unknown one
+    raises ValueError listing the valid names); (spec, None) without a "+" or for an existing file's path."""
+    text = str(spec)
+    base, sep, rule = text.rpartition(RULE_SEPARATOR)
+    if not sep or Path(text).exists():
+        return text, None
+    get_rule(rule)
+    return base, rule

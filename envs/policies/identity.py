@@ -16,6 +16,7 @@ from envs.factories import is_plugin
 from envs.policies import AGENTS_DIR, DEFAULT_PREDICTOR, POLICIES, PREDICTOR_POLICIES, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX, parse_sb3
 from predictor.checkpoints import checkpoint_file  # torch-free
+from predictor.group_rules import split_group_rule  # torch-free
 
 
 def artifact_files(cfg: PolicyConfig) -> list[Path]:
@@ -26,7 +27,11 @@ def artifact_files(cfg: PolicyConfig) -> list[Path]:
     predictor = cfg.predictor if cfg.predictor is not None else \
         DEFAULT_PREDICTOR if cfg.name in PREDICTOR_POLICIES else None
     if predictor is not None and not is_plugin(predictor):
-        files.append(checkpoint_file(predictor))
+        try:
+            name = split_group_rule(predictor)[0]  # "NAME+RULE": NAME's weights (the rule is in the config)
+        except ValueError:
+            name = predictor  # an unknown rule: loading fails later, with its own message
+        files.append(checkpoint_file(name))
     if cfg.name.startswith(SB3_PREFIX):
         files.append(parse_sb3(cfg.name)[1])
     elif cfg.name in POLICIES and (AGENTS_DIR / f"{cfg.name}.zip").is_file():

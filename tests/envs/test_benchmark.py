@@ -135,7 +135,10 @@ def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_pat
     pcfg = PolicyConfig("mpc-gpgraph", predictor=str(weights))
     assert artifact_files(pcfg) == [weights] and artifact_digest(PolicyConfig("mpc-cv")) is None
     assert artifact_files(PolicyConfig("mpc-gpgraph"))[0].name == "gpgraph-stgcnn-synthetic.safetensors"
+    ruled = PolicyConfig("mpc-gpgraph", predictor=f"{weights}+coherent-motion")  # NAME+RULE: NAME's weights
+    assert artifact_files(ruled) == [weights]
     cell = suite.cells[0]
+    assert episode_fingerprint(suite, cell, ruled) != episode_fingerprint(suite, cell, pcfg)  # the rule counts
     old = EpisodeRecord(policy="mpc-gpgraph", seed=7, outcome="success", cell=cell.name,
                         fingerprint=episode_fingerprint(suite, cell, pcfg))
     plan = plan_benchmark(suite, [cell], [pcfg], tmp_path, recorded=[old])

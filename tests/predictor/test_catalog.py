@@ -8,6 +8,7 @@ from envs.config import DEFAULT_PREDICTOR
 from predictor.catalog import ROLES, catalog, describe, read_metadata
 from predictor.checkpoint import PACKAGE_CHECKPOINTS, read_safetensors
 from predictor.cli import main
+from predictor.group_rules import split_group_rule
 
 NAMES = sorted(p.stem for p in PACKAGE_CHECKPOINTS.glob("*.safetensors"))
 
@@ -37,7 +38,9 @@ def test_each_description_states_backbone_data_and_validation_loss(name):
 
 
 def test_roles_name_the_default_predictor_of_the_env():
-    assert DEFAULT_PREDICTOR in ROLES and "default predictor of mpc-gpgraph" in ROLES[DEFAULT_PREDICTOR]
+    name, rule = split_group_rule(DEFAULT_PREDICTOR)
+    assert name in ROLES and "default predictor of mpc-gpgraph" in ROLES[name]
+    assert f"grouping by the {rule} rule ({DEFAULT_PREDICTOR})" in ROLES[name]
     assert set(ROLES) <= set(NAMES)
 
 
@@ -45,9 +48,9 @@ def test_list_prints_one_described_line_per_name(capsys):
     assert main(["list"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert [ln.split()[0] for ln in lines] == [n for n, _ in catalog()] == [*NAMES, "constant-velocity"]
-    default = next(ln for ln in lines if ln.split()[0] == DEFAULT_PREDICTOR)
+    default = next(ln for ln in lines if ln.split()[0] == split_group_rule(DEFAULT_PREDICTOR)[0])
     assert "GP-Graph-STGCNN, pairwise group assigner; average linkage at 1.1 x the learned threshold" in default
     assert "trained on crowdsim synthetic data (96/24/24 train/val/test recordings)" in default
-    assert default.endswith("role: the default predictor of mpc-gpgraph (and of every crowdnav policy that predicts)")
+    assert default.endswith("the default predictor of mpc-gpgraph (and of every crowdnav policy that predicts)")
     assert "model-free baseline" in lines[-1]
     assert len({ln.index(ln.split()[1]) for ln in lines}) == 1  # descriptions start in one column

@@ -10,10 +10,9 @@ import pytest
 import torch
 
 from predictor import load_predictor
-from predictor.api import split_group_rule
 from predictor.cli import main
 from predictor.ethucy import DEFAULT_DATA_DIR
-from predictor.group_rules import GROUP_RULES, CoherentMotionRule, ProximityRule, apply_rule, get_rule
+from predictor.group_rules import GROUP_RULES, CoherentMotionRule, ProximityRule, apply_rule, get_rule, split_group_rule
 from predictor.group_validation import read_labelled
 
 UCY_GROUPS = DEFAULT_DATA_DIR.absolute().parent / "eth_ucy_groups"  # beside the ETH/UCY data in ../shared
