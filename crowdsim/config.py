@@ -96,6 +96,16 @@ class GroupForceParams:
     linearly to zero as the others' centre comes within `gaze_fade_m` of the member (the middle of an abreast
     triple), where its direction is undefined. The calibration: scripts/calibrate_group_speed.py; the test:
     tests/crowdsim/test_fundamental_diagram.py.
+
+    Rows (added here): groups above three walk in two rows, as sub-groups (Moussaïd et al. 2010,
+    `groups.gaze_subgroups`), and each member looks mostly at its own row; `whole_group_gaze_share` of its gaze
+    brake and catch-up push is directed at the whole group's other members instead, since members of a large group
+    also turn to the other row to keep it together. 0: rows ignore each other, the front row never waits for the
+    back one, and groups of 4-5 walked as fast as triples (0.08 m/s slower than people alone) and 5s only 0.12
+    slower; 1: Moussaïd's model, everyone looks at the whole group, the front row brakes until the rows walk
+    nearly abreast, and 4-5s walked 0.18-0.21 m/s slower. The share is calibrated so that groups of 4 and 5 slow
+    down by Moussaïd's 0.04 m/s per member, 0.12 and 0.16 m/s (`scripts/calibrate_group_speed.py --rows`, seeds
+    1000-1039: 0.123 and 0.150). Groups of up to three are one row and are not affected.
     """
 
     gaze_strength: float = 4.0  # beta1, 1/s (multiplies alpha [rad] * v [m/s])
@@ -105,12 +115,14 @@ class GroupForceParams:
     vision_half_angle_deg: float = 90.0
     catch_up_strength: float = 4.0  # 1/s, the same as beta1: the pull is symmetric
     gaze_fade_m: float = 0.4
+    whole_group_gaze_share: float = 0.125  # dimensionless, in [0, 1]: rows of groups above three (see above)
 
     def __post_init__(self) -> None:
         for name in ("gaze_strength", "coherence_strength_mps2", "repulsion_strength_mps2", "catch_up_strength"):
             _non_negative(name, getattr(self, name))
         _positive("repulsion_distance_m", self.repulsion_distance_m)
         _positive("gaze_fade_m", self.gaze_fade_m)
+        _in_range("whole_group_gaze_share", self.whole_group_gaze_share, 0.0, 1.0)
         _in_range("vision_half_angle_deg", self.vision_half_angle_deg, 0.0, 180.0)
 
 

@@ -91,6 +91,26 @@ def wall_acc(pos: np.ndarray, radius: np.ndarray, segments: np.ndarray,
     return np.einsum("ns,nsk->nk", mag, n)
 
 
+def _gaze_and_catch_up(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, speed: np.ndarray, look: np.ndarray,
+                       params: GroupForceParams) -> np.ndarray:
+    """(N, 2) gaze brake and catch-up push of each member towards the centre of the others of its `look` group
+    (N,) dense labels (the whole group or its row); members with no others in it get none."""
+    n_look = int(look.max()) + 1 if len(look) else 0
+    count = np.bincount(look, minlength=n_look)[look].astype(float)
+    total = scatter_add(n_look, look, pos)[look]
+    others = (total - pos) / np.maximum(count - 1.0, 1.0)[:, None]
+    to_others, dist_others = unit(others - pos)
+    angle = np.arccos(np.clip(np.einsum("nk,nk->n", e, to_others), -1.0, 1.0))
+    half = np.deg2rad(params.vision_half_angle_deg)
+    alpha = np.maximum(angle - half, 0.0)
+    behind = np.maximum(np.pi - half - angle, 0.0)  # how far the others are ahead of abreast (rad)
+    fade = np.minimum(dist_others / params.gaze_fade_m, 1.0)  # the direction to a point at one's feet is moot
+    looking = fade * (count > 1)
+    acc = (params.catch_up_strength * behind * speed * looking)[:, None] * e
+    acc -= (params.gaze_strength * alpha * looking)[:, None] * vel
+    return acc
+
+
 def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray, i: np.ndarray,
               j: np.ndarray, params: GroupForceParams, gaze_label: np.ndarray | None = None,
               v_desired: np.ndarray | None = None) -> np.ndarray:
@@ -101,7 +121,9 @@ def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray
     label: (N,) dense group labels 0..G-1. v_desired: (N, 2) m/s desired velocities (default: vel); a member
     standing at its place (desired speed ~0) or stuck (speed ~0) is not pushed. gaze_label: (N,) dense labels of
     the sub-groups whose centre each member looks at (default: the whole group); groups above three walk as
-    sub-groups (Moussaïd et al. 2010), and the front one is not held back by looking round at the one behind.
+    sub-groups (Moussaïd et al. 2010). A member of a group split into sub-groups directs the share
+    `params.whole_group_gaze_share` of its gaze and catch-up at the whole group's other members and the rest at
+    its own sub-group's, so the front row is held back by the row behind only that much.
     Pairs (i, j) from the spatial index are reused for the repulsion between members closer than d0. Singletons
     receive no group force.
     """
@@ -113,21 +135,15 @@ def group_acc(pos: np.ndarray, vel: np.ndarray, e: np.ndarray, label: np.ndarray
     in_group = size > 1
     centre = scatter_add(n_groups, label, pos)[label] / size[:, None]
     # Gaze: rotate the head towards the other members' centre (of one's sub-group); beyond the vision field,
-    # slow down.
-    n_sub = int(gaze_label.max()) + 1 if n else 0
-    sub = np.bincount(gaze_label, minlength=n_sub)[gaze_label].astype(float)
-    sub_centre = scatter_add(n_sub, gaze_label, pos)[gaze_label] / sub[:, None]
-    others = (sub_centre * sub[:, None] - pos) / np.maximum(sub - 1.0, 1.0)[:, None]
-    to_others, dist_others = unit(others - pos)
-    angle = np.arccos(np.clip(np.einsum("nk,nk->n", e, to_others), -1.0, 1.0))
-    half = np.deg2rad(params.vision_half_angle_deg)
-    alpha = np.maximum(angle - half, 0.0)
-    behind = np.maximum(np.pi - half - angle, 0.0)  # how far the others are ahead of abreast (rad)
-    fade = np.minimum(dist_others / params.gaze_fade_m, 1.0)  # the direction to a point at one's feet is moot
-    looking = fade * (in_group & (sub > 1))
+    # slow down; catch up with others ahead of abreast.
     speed = np.minimum(unit(v_desired)[1], unit(vel)[1])
-    acc = (params.catch_up_strength * behind * speed * looking)[:, None] * e
-    acc -= (params.gaze_strength * alpha * looking)[:, None] * vel
+    acc = _gaze_and_catch_up(pos, vel, e, speed, gaze_label, params)  # none for singletons
+    n_sub = int(gaze_label.max()) + 1 if n else 0
+    split = np.bincount(gaze_label, minlength=n_sub)[gaze_label] < size  # one's sub-group is not the whole group
+    share = params.whole_group_gaze_share
+    if share > 0 and split.any():
+        whole = _gaze_and_catch_up(pos, vel, e, speed, label, params)
+        acc[split] = (1.0 - share) * acc[split] + share * whole[split]
     # Coherence: attraction to the centre of mass once farther than (n - 1) / 2 m (smoothed over 0.25 m).
     to_centre, d_centre = unit(centre - pos)
     q = np.clip((d_centre - 0.5 * (size - 1.0)) / 0.25, 0.0, 1.0) * in_group

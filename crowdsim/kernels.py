@@ -18,12 +18,13 @@ from crowdsim.fma import fma
 
 
 def pack_params(social: SocialForceParams, group: GroupForceParams) -> np.ndarray:
-    """(14,) float64 parameter vector in the order the kernel reads it."""
+    """(15,) float64 parameter vector in the order the kernel reads it."""
     return np.array([
         social.ped_strength_mps2, social.ped_range_m, social.anisotropy, social.relaxation_time_s,
         social.wall_strength_mps2, social.wall_range_m, social.cutoff_m, group.gaze_strength,
         group.coherence_strength_mps2, group.repulsion_strength_mps2, group.repulsion_distance_m,
         math.radians(group.vision_half_angle_deg), group.catch_up_strength, group.gaze_fade_m,
+        group.whole_group_gaze_share,
     ])
 
 
@@ -44,6 +45,22 @@ def _walls(acc, pos, radius, n, walls, aw, bw, cutoff):
 
 
 @numba.njit(cache=True)
+def _look(acc, k, sum_x, sum_y, count, pos, vel, e, speed, weight, p):
+    """Add weight x the gaze brake and catch-up push of member k towards the centre of the count - 1 others
+    whose positions, with its own, sum to (sum_x, sum_y) (`forces._gaze_and_catch_up`)."""
+    ox = (sum_x - pos[k, 0]) / (count - 1.0) - pos[k, 0]
+    oy = (sum_y - pos[k, 1]) / (count - 1.0) - pos[k, 1]
+    on = math.sqrt(ox * ox + oy * oy)
+    cos = (e[k, 0] * ox + e[k, 1] * oy) / on if on > 1e-9 else 0.0
+    angle = math.acos(min(max(cos, -1.0), 1.0))
+    fade = min(on / p[13], 1.0)
+    brake = p[7] * max(angle - p[11], 0.0) * fade
+    catch = p[12] * max(math.pi - p[11] - angle, 0.0) * fade * speed
+    acc[k, 0] += weight * (catch * e[k, 0] - brake * vel[k, 0])
+    acc[k, 1] += weight * (catch * e[k, 1] - brake * vel[k, 1])
+
+
+@numba.njit(cache=True)
 def _groups(acc, pos, vel, v_des, e, label, gaze_label, n, i, j, p):
     g = label.max() + 1
     sx, sy, cnt = np.zeros(g), np.zeros(g), np.zeros(g)
@@ -55,24 +72,21 @@ def _groups(acc, pos, vel, v_des, e, label, gaze_label, n, i, j, p):
         gx[gaze_label[k]] += pos[k, 0]
         gy[gaze_label[k]] += pos[k, 1]
         gcnt[gaze_label[k]] += 1.0
+    share = p[14]
     for k in range(n):
         size = cnt[label[k]]
         if size < 2:
             continue
         cx, cy = sx[label[k]] / size, sy[label[k]] / size
         gsize = gcnt[gaze_label[k]]
-        if gsize > 1:
-            ox = (gx[gaze_label[k]] - pos[k, 0]) / (gsize - 1.0) - pos[k, 0]
-            oy = (gy[gaze_label[k]] - pos[k, 1]) / (gsize - 1.0) - pos[k, 1]
-            on = math.sqrt(ox * ox + oy * oy)
-            cos = (e[k, 0] * ox + e[k, 1] * oy) / on if on > 1e-9 else 0.0
-            angle = math.acos(min(max(cos, -1.0), 1.0))
-            fade = min(on / p[13], 1.0)
-            brake = p[7] * max(angle - p[11], 0.0) * fade
-            speed = min(math.sqrt(v_des[k, 0] ** 2 + v_des[k, 1] ** 2), math.sqrt(vel[k, 0] ** 2 + vel[k, 1] ** 2))
-            catch = p[12] * max(math.pi - p[11] - angle, 0.0) * fade * speed
-            acc[k, 0] += catch * e[k, 0] - brake * vel[k, 0]
-            acc[k, 1] += catch * e[k, 1] - brake * vel[k, 1]
+        speed = min(math.sqrt(v_des[k, 0] ** 2 + v_des[k, 1] ** 2), math.sqrt(vel[k, 0] ** 2 + vel[k, 1] ** 2))
+        if gsize == size:  # one row: the whole group
+            _look(acc, k, gx[gaze_label[k]], gy[gaze_label[k]], gsize, pos, vel, e, speed, 1.0, p)
+        else:  # a row of a larger group: mostly its own row, the share `whole_group_gaze_share` the whole group
+            if gsize > 1:
+                _look(acc, k, gx[gaze_label[k]], gy[gaze_label[k]], gsize, pos, vel, e, speed, 1.0 - share, p)
+            if share > 0.0:
+                _look(acc, k, sx[label[k]], sy[label[k]], size, pos, vel, e, speed, share, p)
         tx, ty = cx - pos[k, 0], cy - pos[k, 1]
         dc = math.sqrt(tx * tx + ty * ty)
         if dc > 1e-9:

@@ -85,19 +85,23 @@ def test_singles_join_standing_groups_and_members_part_with_new_labels():
     assert joined >= 3 and parted >= 3
 
 
+@pytest.mark.slow
 def test_strangers_enter_close_enough_that_distance_alone_calls_them_a_group():
     """With every arriving single placed beside or behind the last group, many pairs of people with
     different labels stay within 1.5 m for 8 consecutive recorded steps (3.2 s): the distance rule that
-    finds groups in a crowd without strangers makes false pairs here. Seeds 2-4 pooled: 165 false pairs
-    without strangers, 349 with strangers who keep pace with their group, 258 with strangers who walk at their
-    own speed (stranger_follow_gain_per_s 0: they drift away)."""
+    finds groups in a crowd without strangers makes false pairs here. Seeds 2-16 pooled: 714 false pairs
+    without strangers, 1605 with strangers who keep pace with their group, 1493 with strangers who walk at their
+    own speed (stranger_follow_gain_per_s 0: they drift away). Keeping pace adds ~17 false pairs per seed (seeds
+    17-46: 16.3 +- 3.9; 19.9 +- 3.9 before groups of 4-5 looked round at their other row), too few to show on the
+    3 seeds this test used to pool: their ratio was 1.35 before that change reshuffled the runs and 0.99 after,
+    and the old model's own seeds 5-7 gave 0.92 (~12 s)."""
     base = dict(scenario="plaza", n_pedestrians=24)
     false_pairs = []
     for prob, gain in ((0.0, 0.5), (1.0, 0.5), (1.0, 0.0)):
         behaviour = BehaviourConfig(stranger_companion_prob=prob, stranger_follow_gain_per_s=gain)
-        false_pairs.append(sum(_false_pairs(SimConfig(behaviour=behaviour, **base), seed) for seed in (2, 3, 4)))
+        false_pairs.append(sum(_false_pairs(SimConfig(behaviour=behaviour, **base), seed) for seed in range(2, 17)))
     assert false_pairs[1] > 1.8 * false_pairs[0], false_pairs
-    assert false_pairs[1] > 1.2 * false_pairs[2], false_pairs  # keeping pace is what keeps them close
+    assert false_pairs[1] > 1.05 * false_pairs[2], false_pairs  # keeping pace is what keeps them close
 
 
 def _false_pairs(config: SimConfig, seed: int) -> int:
@@ -175,7 +179,7 @@ def test_formations_change_with_density_from_abreast_to_v_and_river():
     assert share(dense, "river") > share(sparse, "river") + 0.15, (sparse, dense)
 
 
-def test_groups_above_three_look_at_their_own_row_and_the_front_row_is_not_held_back():
+def test_groups_above_three_look_mostly_at_their_own_row_and_the_front_row_is_held_back_a_little():
     from crowdsim import forces
     from crowdsim.config import GroupForceParams
     from crowdsim.groups import gaze_subgroups
@@ -188,7 +192,16 @@ def test_groups_above_three_look_at_their_own_row_and_the_front_row_is_not_held_
     vel = np.tile([1.2, 0.0], (6, 1))
     e = vel / 1.2
     none = np.zeros(0, np.int64)
-    whole = forces.group_acc(pos, vel, e, label, none, none, GroupForceParams())
-    rows = forces.group_acc(pos, vel, e, label, none, none, GroupForceParams(), gaze_label=sub)
+    params = GroupForceParams()
+    whole = forces.group_acc(pos, vel, e, label, none, none, params)
+    own_row = forces.group_acc(pos, vel, e, label, none, none, GroupForceParams(whole_group_gaze_share=0.0),
+                               gaze_label=sub)
+    rows = forces.group_acc(pos, vel, e, label, none, none, params, gaze_label=sub)
     assert whole[0, 0] < -0.5 and whole[1, 0] < -0.5  # looking round at the row behind brakes the front row
-    assert rows[0, 0] == pytest.approx(0.0, abs=1e-9) and rows[1, 0] == pytest.approx(0.0, abs=1e-9)
+    assert own_row[0, 0] == pytest.approx(0.0, abs=1e-9) and own_row[1, 0] == pytest.approx(0.0, abs=1e-9)
+    share = params.whole_group_gaze_share
+    assert 0.0 < share < 1.0
+    np.testing.assert_allclose(rows[:4], (1.0 - share) * own_row[:4] + share * whole[:4], rtol=1e-12, atol=1e-12)
+    assert whole[0, 0] < rows[0, 0] < -0.05  # the front row waits for the back one, a little
+    assert rows[2, 0] > 0.05  # and the back row catches up
+    np.testing.assert_array_equal(rows[4:], whole[4:])  # a pair is one row: unaffected

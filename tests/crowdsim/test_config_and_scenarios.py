@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdsim.config import GroupConfig, SimConfig, SocialForceParams
+from crowdsim.config import GroupConfig, GroupForceParams, SimConfig, SocialForceParams
 from crowdsim.groups import draw_group_sizes, formation_offsets
 from crowdsim.scenarios import SCENARIOS, Flow, Scenario, make_scenario
 from crowdsim.sim import CrowdSimulator
@@ -27,6 +27,12 @@ def test_group_larger_than_crowd_is_rejected():
 def test_bad_force_parameters_are_rejected(kwargs):
     with pytest.raises(ValueError):
         SocialForceParams(**kwargs)
+
+
+@pytest.mark.parametrize("share", [-0.1, 1.5, float("nan")])
+def test_whole_group_gaze_share_outside_0_1_is_rejected(share):
+    with pytest.raises(ValueError, match="whole_group_gaze_share"):
+        GroupForceParams(whole_group_gaze_share=share)
 
 
 def test_physics_sub_step_above_50_ms_is_rejected():
@@ -81,7 +87,9 @@ def test_every_scenario_runs_clean_and_keeps_labels_consistent(name):
         assert len(np.unique(s.ped_id[act])) == act.sum()
         g = s.group_id[act]
         assert set(np.unique(g)) == set(range(g.max() + 1))  # dense 0..G-1
-        assert max_overlap(s) < 0.05
+        # transient overlaps when groups meet head-on: at most 0.058 m over seeds 0-11 in the corridor, 0.061 since
+        # groups of 4-5 look round at their other row (two triples meeting, this seed)
+        assert max_overlap(s) < 0.07
         for pid in s.ped_id[act]:
             ids_seen.setdefault(int(pid), s.frame)
     if sim.scenario.continuous:
@@ -92,4 +100,6 @@ def test_every_scenario_runs_clean_and_keeps_labels_consistent(name):
 def test_plaza_runs_for_long_recordings_without_draining():
     sim, states = run(SimConfig(scenario="plaza", n_pedestrians=20), seed=0, steps=750)  # 5 minutes
     counts = [s.n_active for s in states[100:]]
-    assert min(counts) >= 14 and sim.n_exited > 60
+    # a group waits for room for all of it, so a few places stay free for a while: the fewest present over seeds 0-7
+    # were 13-16 (12-16 since groups of 4-5 look round at their other row; 13 on this seed), the mean 19.2-19.4
+    assert min(counts) >= 12 and np.mean(counts) > 18.5 and sim.n_exited > 60

@@ -144,6 +144,24 @@ def test_fused_kernel_matches_the_numpy_reference_with_groups_walls_and_robot():
     np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
 
 
+@pytest.mark.parametrize("share", [0.0, 0.125, 1.0])
+def test_fused_kernel_matches_the_numpy_reference_for_groups_in_two_rows(share):
+    from crowdsim.config import GroupConfig, SimConfig
+    from crowdsim.sim import CrowdSimulator
+
+    config = SimConfig(scenario="plaza", n_pedestrians=30, groups=GroupConfig(size_poisson_rate=2.5),
+                       group_forces=GroupForceParams(whole_group_gaze_share=share))
+    sim = CrowdSimulator(config)
+    sim.reset(1)
+    for _ in range(5):
+        sim.step()
+    _, labels, gaze = sim._active_index()
+    assert (np.bincount(gaze)[gaze] < np.bincount(labels)[labels]).sum() >= 8  # two groups or more in two rows
+    fast, _ = sim.accelerations()
+    ref, _ = sim.accelerations(reference=True)
+    np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
+
+
 def test_cell_grid_grows_its_buffer_for_very_dense_clusters():
     pos = np.random.default_rng(9).uniform(0, 2.0, (300, 2))  # every pair is within the cut-off
     i, j = neighbor_pairs(pos, 3.0)
