@@ -103,19 +103,32 @@ class GroupForceParams:
     also turn to the other row to keep it together. 0: rows ignore each other, the front row never waits for the
     back one, and groups of 4-5 walked as fast as triples (0.08 m/s slower than people alone) and 5s only 0.12
     slower; 1: Moussaïd's model, everyone looks at the whole group, the front row brakes until the rows walk
-    nearly abreast, and 4-5s walked 0.18-0.21 m/s slower. The share is calibrated so that groups of 4 and 5 slow
-    down by Moussaïd's 0.04 m/s per member, 0.12 and 0.16 m/s (`scripts/calibrate_group_speed.py --rows`, seeds
-    1000-1039: 0.123 and 0.150). Groups of up to three are one row and are not affected.
+    nearly abreast, and 4-5s walked 0.18-0.21 m/s slower (both with members repelling each other as strangers
+    do, below). The share is calibrated so that groups of 4 and 5 slow down by Moussaïd's 0.04 m/s per member,
+    0.12 and 0.16 m/s (`scripts/calibrate_group_speed.py --rows`, seeds 1000-1039: 0.130 and 0.145 at 0.6; it
+    was 0.125 before members stopped repelling each other as strangers, and 4-5s then walked at -0.08/-0.12).
+    Groups of up to three are one row and are not affected.
+
+    Members tolerate each other (added here): `member_ped_repulsion_scale` multiplies the ordinary pedestrian
+    (social-force) repulsion `SocialForceParams` between two members of the same group. Members of a group walk
+    inside each other's personal zone, and in Moussaïd et al.'s (2010) group model their spacing is kept by the
+    group repulsion term (beta3 within d0) alone; the strangers' repulsion between them pushed a lone pair to
+    1.06 m apart against the coherence ramp, where real groups walk 0.74 m apart (median, UCY). 1: strangers'
+    repulsion between members as well (the model before, bit for bit); 0: none (Moussaïd's), the default. With
+    it, d0 = 0.6 m (was 0.8) sets the spacing: in-group pairs of the realistic-v1 preset walk 0.75 m apart
+    (median; 1.10 before) and 0.29 m/s relative speed (0.35; UCY 0.14), scripts/measure_group_geometry.py on
+    seeds 1000-1003; tests/crowdsim/test_group_geometry.py.
     """
 
     gaze_strength: float = 4.0  # beta1, 1/s (multiplies alpha [rad] * v [m/s])
     coherence_strength_mps2: float = 3.0  # beta2
     repulsion_strength_mps2: float = 1.0  # beta3
-    repulsion_distance_m: float = 0.8  # d0
+    repulsion_distance_m: float = 0.6  # d0, m: the members' spacing (see member_ped_repulsion_scale)
     vision_half_angle_deg: float = 90.0
     catch_up_strength: float = 4.0  # 1/s, the same as beta1: the pull is symmetric
     gaze_fade_m: float = 0.4
-    whole_group_gaze_share: float = 0.125  # dimensionless, in [0, 1]: rows of groups above three (see above)
+    whole_group_gaze_share: float = 0.6  # dimensionless, in [0, 1]: rows of groups above three (see above)
+    member_ped_repulsion_scale: float = 0.0  # dimensionless, in [0, 1]: strangers' repulsion between members
 
     def __post_init__(self) -> None:
         for name in ("gaze_strength", "coherence_strength_mps2", "repulsion_strength_mps2", "catch_up_strength"):
@@ -123,6 +136,7 @@ class GroupForceParams:
         _positive("repulsion_distance_m", self.repulsion_distance_m)
         _positive("gaze_fade_m", self.gaze_fade_m)
         _in_range("whole_group_gaze_share", self.whole_group_gaze_share, 0.0, 1.0)
+        _in_range("member_ped_repulsion_scale", self.member_ped_repulsion_scale, 0.0, 1.0)
         _in_range("vision_half_angle_deg", self.vision_half_angle_deg, 0.0, 180.0)
 
 

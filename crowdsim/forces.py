@@ -62,9 +62,18 @@ def scatter_add(n: int, idx: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 
 def pedestrian_acc(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.ndarray, j: np.ndarray,
-                   params: SocialForceParams) -> np.ndarray:
-    """(N, 2) total pedestrian repulsion given neighbour pairs (i, j) (P,) from the spatial index."""
+                   params: SocialForceParams, label: np.ndarray | None = None,
+                   member_scale: float = 1.0) -> np.ndarray:
+    """(N, 2) total pedestrian repulsion given neighbour pairs (i, j) (P,) from the spatial index.
+
+    label: (N,) group labels (negative: in no group, e.g. the robot); the repulsion between two rows with the same
+    non-negative label (members of one group) is multiplied by member_scale in [0, 1]
+    (`GroupForceParams.member_ped_repulsion_scale`). Without labels every pair repels fully.
+    """
     acc_i, acc_j = pair_terms(pos[i] - pos[j], radius[i] + radius[j], e[i], e[j], params)
+    if label is not None and member_scale != 1.0:
+        scale = np.where((label[i] == label[j]) & (label[i] >= 0), member_scale, 1.0)[:, None]
+        acc_i, acc_j = acc_i * scale, acc_j * scale
     n = len(pos)
     return scatter_add(n, i, acc_i) + scatter_add(n, j, acc_j)
 

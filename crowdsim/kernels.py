@@ -18,13 +18,13 @@ from crowdsim.fma import fma
 
 
 def pack_params(social: SocialForceParams, group: GroupForceParams) -> np.ndarray:
-    """(15,) float64 parameter vector in the order the kernel reads it."""
+    """(16,) float64 parameter vector in the order the kernel reads it."""
     return np.array([
         social.ped_strength_mps2, social.ped_range_m, social.anisotropy, social.relaxation_time_s,
         social.wall_strength_mps2, social.wall_range_m, social.cutoff_m, group.gaze_strength,
         group.coherence_strength_mps2, group.repulsion_strength_mps2, group.repulsion_distance_m,
         math.radians(group.vision_half_angle_deg), group.catch_up_strength, group.gaze_fade_m,
-        group.whole_group_gaze_share,
+        group.whole_group_gaze_share, group.member_ped_repulsion_scale,
     ])
 
 
@@ -107,7 +107,7 @@ def _groups(acc, pos, vel, v_des, e, label, gaze_label, n, i, j, p):
 
 
 @numba.njit(cache=True)
-def _pairs(acc, pos, radius, e, i, j, n, p):
+def _pairs(acc, pos, radius, e, i, j, n, pair_label, p):
     for m in range(i.shape[0]):
         a, b = i[m], j[m]
         if a >= n and b >= n:
@@ -118,6 +118,8 @@ def _pairs(acc, pos, radius, e, i, j, n, p):
             continue
         nx, ny = dx / d, dy / d
         mag = p[0] * math.exp((radius[a] + radius[b] - d) / p[1])
+        if pair_label[a] >= 0 and pair_label[a] == pair_label[b]:  # members of one group
+            mag *= p[15]
         if a < n:
             w = p[2] + (1.0 - p[2]) * 0.5 * (1.0 - (nx * e[a, 0] + ny * e[a, 1]))
             acc[a, 0] += mag * w * nx
@@ -129,9 +131,9 @@ def _pairs(acc, pos, radius, e, i, j, n, p):
 
 
 @numba.njit(cache=True)
-def _all(pos, radius, e, i, j, n, vel, v_des, walls, label, gaze_label, p):
+def _all(pos, radius, e, i, j, n, vel, v_des, walls, label, gaze_label, pair_label, p):
     acc = np.zeros((n, 2))
-    _pairs(acc, pos, radius, e, i, j, n, p)
+    _pairs(acc, pos, radius, e, i, j, n, pair_label, p)
     for k in range(n):
         acc[k, 0] += (v_des[k, 0] - vel[k, 0]) / p[3]
         acc[k, 1] += (v_des[k, 1] - vel[k, 1]) / p[3]
@@ -143,17 +145,21 @@ def _all(pos, radius, e, i, j, n, vel, v_des, walls, label, gaze_label, p):
 
 def social_acc(pos: np.ndarray, radius: np.ndarray, e: np.ndarray, i: np.ndarray, j: np.ndarray, n: int,
                vel: np.ndarray, v_des: np.ndarray, walls: np.ndarray, label: np.ndarray,
-               gaze_label: np.ndarray, params: np.ndarray) -> np.ndarray:
+               gaze_label: np.ndarray, params: np.ndarray, pair_label: np.ndarray | None = None) -> np.ndarray:
     """(n, 2) m/s^2: driving + pedestrian + wall + group accelerations of the first n agents.
 
     pos/radius/e (M, 2)/(M,)/(M, 2) include M - n extra agents (robot, periodic ghosts) that push the
     real ones but are not pushed; pairs (i, j) index those rows; vel, v_des (n, 2); walls (S, 2, 2);
     label (n,) dense group labels; gaze_label (n,) dense labels of the sub-groups whose members each one looks
-    at (`groups.gaze_subgroups`); params from `pack_params`.
+    at (`groups.gaze_subgroups`); params from `pack_params`. pair_label (M,): the group label of every row for
+    the pedestrian repulsion (`forces.pedestrian_acc`; negative: in no group), default label then -1 for the
+    extra rows; members of one group repel each other `GroupForceParams.member_ped_repulsion_scale` as much.
     """
+    if pair_label is None:
+        pair_label = np.concatenate([label, np.full(len(pos) - n, -1, label.dtype)])
     return _all(np.ascontiguousarray(pos), radius, np.ascontiguousarray(e), i, j, n,
                 np.ascontiguousarray(vel), np.ascontiguousarray(v_des), np.ascontiguousarray(walls, dtype=float),
-                label, gaze_label, params)
+                label, gaze_label, np.ascontiguousarray(pair_label, dtype=np.int64), params)
 
 
 @numba.njit(cache=True)

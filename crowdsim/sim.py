@@ -228,18 +228,20 @@ class CrowdSimulator:
         else:
             v_des, e = kernels.desired_and_heading(pos, vel, s.goal[idx], s.speed[idx], cfg.social.slowdown_radius_m)
         radius = s.radius[idx]
-        pos_all, rad_all, e_all = pos, radius, e
+        pos_all, rad_all, e_all, lab_all = pos, radius, e, labels
         if self.robot is not None and cfg.robot.visible:
             e_r = self._robot_heading()
             pos_all = np.concatenate([pos, self.world.robot_position()[None]])
             rad_all, e_all = np.append(radius, self.robot.radius_m), np.concatenate([e, e_r])
-        pos_all, rad_all, e_all = self._periodic_ghosts(pos_all, rad_all, e_all)
+            lab_all = np.append(labels, -1)  # the robot is in no group
+        pos_all, rad_all, e_all, lab_all = self._periodic_ghosts(pos_all, rad_all, e_all, lab_all)
         i, j = neighbor_pairs(pos_all, cfg.social.cutoff_m)
         if not reference:
             acc = kernels.social_acc(pos_all, rad_all, e_all, i, j, len(idx), vel, v_des, self.scenario.walls,
-                                     labels, gaze, self._params)
+                                     labels, gaze, self._params, lab_all)
             return acc, idx
-        acc = forces.pedestrian_acc(pos_all, rad_all, e_all, i, j, cfg.social)[: len(idx)]
+        acc = forces.pedestrian_acc(pos_all, rad_all, e_all, i, j, cfg.social, lab_all,
+                                    cfg.group_forces.member_ped_repulsion_scale)[: len(idx)]
         acc += forces.driving_acc(vel, v_des, cfg.social)
         acc += forces.wall_acc(pos, radius, self.scenario.walls, cfg.social)
         inner = (i < len(idx)) & (j < len(idx))
@@ -272,19 +274,21 @@ class CrowdSimulator:
             self._index_cache = (idx, dense, gaze)
         return self._index_cache
 
-    def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray,
-                         e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _periodic_ghosts(self, pos: np.ndarray, radius: np.ndarray, e: np.ndarray,
+                         label: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Append shifted copies of agents within the cut-off of a periodic seam, so that interactions
-        reach across it. Real agents keep their row indices; ghosts come after them."""
+        reach across it. Real agents keep their row indices; ghosts come after them, with their source's
+        group label."""
         if self.scenario.periodic_x is None:
-            return pos, radius, e
+            return pos, radius, e, label
         x0, x1 = self.scenario.periodic_x
         cut = self.config.social.cutoff_m
         near_lo = np.flatnonzero(pos[:, 0] < x0 + cut)
         near_hi = np.flatnonzero(pos[:, 0] > x1 - cut)
         ghosts = np.concatenate([pos[near_lo] + [x1 - x0, 0.0], pos[near_hi] - [x1 - x0, 0.0]])
         src = np.concatenate([near_lo, near_hi])
-        return np.concatenate([pos, ghosts]), np.append(radius, radius[src]), np.concatenate([e, e[src]])
+        return (np.concatenate([pos, ghosts]), np.append(radius, radius[src]), np.concatenate([e, e[src]]),
+                np.append(label, label[src]))
 
     def _force_step(self) -> None:
         s, cfg = self.slots, self.config

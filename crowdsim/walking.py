@@ -84,3 +84,18 @@ def walking_speeds(config: SimConfig, seeds: list[int] | tuple[int, ...], steps:
             samples.extend(speeds.tolist())
     return WalkingSpeeds(np.array(per_person), np.array(group_size, dtype=int), np.array(samples),
                          np.array(desired))
+
+
+def group_pair_geometry(obs: np.ndarray, group_id: np.ndarray, dt_s: float = 0.4) -> tuple[np.ndarray, np.ndarray]:
+    """How far apart and how coherently the members of each group walk in one observed window.
+
+    obs (T, N, 2) m: positions of N people at T frames dt_s apart (an ETH/UCY window: T = 8, 0.4 s);
+    group_id (N,) int. Returns, for every pair of members of the same group, its mean distance over the window (m)
+    and its mean relative speed |v_i - v_j| over the T - 1 frame differences (m/s), each (P,)."""
+    iu, ju = np.triu_indices(obs.shape[1], 1)
+    same = group_id[iu] == group_id[ju]
+    iu, ju = iu[same], ju[same]
+    dist = np.linalg.norm(obs[:, iu] - obs[:, ju], axis=-1).mean(axis=0)
+    vel = np.diff(obs, axis=0) / dt_s
+    rel = np.linalg.norm(vel[:, iu] - vel[:, ju], axis=-1).mean(axis=0)
+    return dist, rel

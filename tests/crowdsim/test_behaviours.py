@@ -94,13 +94,16 @@ def test_strangers_enter_close_enough_that_distance_alone_calls_them_a_group():
     own speed (stranger_follow_gain_per_s 0: they drift away). Keeping pace adds ~17 false pairs per seed (seeds
     17-46: 16.3 +- 3.9; 19.9 +- 3.9 before groups of 4-5 looked round at their other row), too few to show on the
     3 seeds this test used to pool: their ratio was 1.35 before that change reshuffled the runs and 0.99 after,
-    and the old model's own seeds 5-7 gave 0.92 (~12 s)."""
+    and the old model's own seeds 5-7 gave 0.92 (~12 s). Since members stopped repelling each other as strangers
+    do (`GroupForceParams.member_ped_repulsion_scale` = 0, d0 = 0.6 m, share 0.6) the tighter groups leave more
+    chance encounters within 1.5 m even without strangers: 958, 1715, 1516 (ratio 1.79, was 2.25; the member
+    change alone at the old d0: 903, 1704, 1392, ratio 1.89), hence 1.5 for "strangers nearly double them"."""
     base = dict(scenario="plaza", n_pedestrians=24)
     false_pairs = []
     for prob, gain in ((0.0, 0.5), (1.0, 0.5), (1.0, 0.0)):
         behaviour = BehaviourConfig(stranger_companion_prob=prob, stranger_follow_gain_per_s=gain)
         false_pairs.append(sum(_false_pairs(SimConfig(behaviour=behaviour, **base), seed) for seed in range(2, 17)))
-    assert false_pairs[1] > 1.8 * false_pairs[0], false_pairs
+    assert false_pairs[1] > 1.5 * false_pairs[0], false_pairs
     assert false_pairs[1] > 1.05 * false_pairs[2], false_pairs  # keeping pace is what keeps them close
 
 

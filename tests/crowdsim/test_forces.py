@@ -162,6 +162,43 @@ def test_fused_kernel_matches_the_numpy_reference_for_groups_in_two_rows(share):
     np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
 
 
+@pytest.mark.parametrize("scale", [0.0, 0.5, 1.0])
+def test_fused_kernel_matches_the_numpy_reference_with_members_tolerating_each_other(scale):
+    from crowdsim.config import GroupConfig, SimConfig
+    from crowdsim.sim import CrowdSimulator
+
+    for scenario in ("plaza", "corridor"):  # the corridor is periodic: ghosts carry their source's group label
+        config = SimConfig(scenario=scenario, n_pedestrians=40, groups=GroupConfig(size_poisson_rate=2.5),
+                           group_forces=GroupForceParams(member_ped_repulsion_scale=scale))
+        sim = CrowdSimulator(config)
+        sim.reset(2)
+        for _ in range(5):
+            sim.step()
+        sim.set_robot(sim.slots.pos[np.flatnonzero(sim.slots.active)[0]] + [0.6, 0.0], [0.5, 0.2], 0.3)
+        fast, _ = sim.accelerations()
+        ref, _ = sim.accelerations(reference=True)
+        np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
+
+
+def test_members_of_one_group_repel_each_other_by_the_member_scale_only():
+    pos = np.array([[0.0, 0.0], [0.7, 0.0], [0.0, 0.7], [0.7, 0.7]])
+    e = np.tile([0.0, 1.0], (4, 1))
+    radius = np.full(4, 0.25)
+    label = np.array([0, 0, 1, -1])  # a pair, someone alone, the robot (in no group: never a member)
+    params = SocialForceParams()
+    i, j = brute_force_pairs(pos, params.cutoff_m)
+    full = forces.pedestrian_acc(pos, radius, e, i, j, params)
+    same = (label[i] == label[j]) & (label[i] >= 0)
+    assert same.sum() == 1
+    none = forces.pedestrian_acc(pos, radius, e, i[~same], j[~same], params)
+    np.testing.assert_array_equal(forces.pedestrian_acc(pos, radius, e, i, j, params, label, 1.0), full)
+    np.testing.assert_allclose(forces.pedestrian_acc(pos, radius, e, i, j, params, label, 0.0), none, atol=1e-15)
+    half = forces.pedestrian_acc(pos, radius, e, i, j, params, label, 0.5)
+    np.testing.assert_allclose(half, 0.5 * (full + none), atol=1e-15)
+    with pytest.raises(ValueError, match="member_ped_repulsion_scale"):
+        GroupForceParams(member_ped_repulsion_scale=1.5)
+
+
 def test_cell_grid_grows_its_buffer_for_very_dense_clusters():
     pos = np.random.default_rng(9).uniform(0, 2.0, (300, 2))  # every pair is within the cut-off
     i, j = neighbor_pairs(pos, 3.0)
