@@ -24,19 +24,21 @@ from predictor.windows import Window, load_windows
 NAME = "gpgraph-stgcnn-synthetic"
 SEED = 424242  # training used preset seeds 1000-1035 (no plaza seed near this one)
 DURATION_S = 60.0
-# Floors, with margin below what the shipped checkpoint measured with seed 424242 (version 4, 2026-11-25: the
+# Floors, with margin below what the shipped checkpoint measured with seed 424242 (version 4, trained 2026-11-25: the
 # pairwise group assigner, average linkage at 1.1 x the learned threshold, from its meta, chosen on the crowdsim
-# validation split): best-of-20 ADE on the preset plaza 0.512 vs 0.645 m for constant velocity (0.79x; version 3,
-# the conv assigner: 0.83x); in the default 30-person plaza PW precision/recall 0.96/0.72 (version 3: 0.88/0.52),
-# PW F1 0.83 vs 0.55 for the best last-step distance threshold (2 m; version 3: 0.66), G-MITRE F1 0.94 vs 0.36 for
-# all singletons; best-of-20 ADE there 0.489 vs 0.473 m (1.03x, the xfail below; version 3: 1.10x).
+# validation split). Measured 2026-11-26 on crowdsim after its groups were made to walk as real ones do (members no
+# longer repel each other as strangers, d0 0.6 m, rows of 4-5 look round; RESULTS.md "sim-to-real"): best-of-20 ADE
+# on the preset plaza 0.544 vs 0.690 m for constant velocity (0.79x); in the default 30-person plaza PW
+# precision/recall 0.93/0.85, PW F1 0.89 vs 0.76 for the best last-step distance threshold (1 m; members walk closer
+# now, so distance finds them better: before, 0.83 vs 0.55 at 2 m), G-MITRE F1 0.93 vs 0.29 for all singletons;
+# best-of-20 ADE there 0.516 vs 0.563 m (0.92x; before the change 1.03x, an expected failure).
 MAX_ADE_RATIO = 0.90  # best-of-20 ADE of the model / that of constant velocity, on its training distribution
 MAX_ADE_RATIO_DEFAULT_PLAZA = 0.97  # ... and in the default plaza (xfail)
 MIN_PW_PRECISION = 0.90
 MIN_PW_RECALL = 0.65
 GMITRE_F1_MARGIN = 0.5  # over all singletons
 PROXIMITY_RADII_M = (0.9, 1.0, 1.1, 1.2, 1.3, 1.5, 2.0)  # members spawn 0.75 m apart
-PW_F1_MARGIN_OVER_PROXIMITY = 0.2  # over the best of these radii, chosen in hindsight
+PW_F1_MARGIN_OVER_PROXIMITY = 0.08  # over the best of these radii, chosen in hindsight
 
 
 def _windows(folder, config: SimConfig) -> list[Window]:
@@ -89,9 +91,6 @@ def test_beats_constant_velocity_best_of_20_on_its_training_distribution(
     assert model_ade < MAX_ADE_RATIO * cv_ade, (model_ade, cv_ade)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "measured 0.489 vs 0.473 m (1.03x; version 3, the conv assigner: 1.10x): in the default plaza (no stops, no "
-    "strangers) walkers are straight enough that constant velocity wins; RESULTS.md, 'Default synthetic predictor'"))
 def test_beats_constant_velocity_best_of_20_in_the_default_plaza(model: GPGraphPredictor, plaza: list[Window]) -> None:
     model_ade, cv_ade = _ade_ratio(model, plaza)
     assert model_ade < MAX_ADE_RATIO_DEFAULT_PLAZA * cv_ade, (model_ade, cv_ade)
