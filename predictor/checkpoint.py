@@ -213,10 +213,10 @@ def save_atomic(obj: dict, path: str | Path) -> None:
 
 def save_model(model: GPGraph, path: str | Path, meta: dict | None = None) -> None:
     """Save a model with its config inside (atomic); ``meta`` gains the model's calibration
-    (``meta_with_calibration``) and, unless it has one, the step it serves (``step_s``: STEP_S)."""
+    (``meta_with_calibration``)."""
     save_atomic(
         {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
-         "meta": {META_STEP_S: STEP_S} | meta_with_calibration(model, meta)},
+         "meta": meta_with_calibration(model, meta)},
         path,
     )
 

@@ -22,8 +22,9 @@ from tqdm import tqdm
 
 from predictor.backbones import BACKBONES
 from predictor.batch import Batch, collate
-from predictor.checkpoint import FORMAT, load_state, read_file, save_atomic, save_model
+from predictor.checkpoint import FORMAT, META_STEP_S, load_state, read_file, save_atomic, save_model
 from predictor.device import model_device
+from predictor.ethucy import STEP_S
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.files import write_atomic
 from predictor.gaussian import masked_nll
@@ -296,7 +297,8 @@ def train(
         sched.step()
         if va < best:
             best = va
-            save_model(model, out / "best.pt", meta={"epoch": epoch, "val_loss": va, "train": cfg.to_dict()})
+            save_model(model, out / "best.pt", meta={"epoch": epoch, "val_loss": va, "train": cfg.to_dict(),
+                                                     META_STEP_S: STEP_S})
         metrics = [f"{ade:.6f}", f"{fde:.6f}"] if evaluated else ["", ""]
         with log_path.open("a", newline="") as f:
             csv.writer(f).writerow([epoch, f"{tr:.6f}", f"{va:.6f}", f"{lr:.6g}", f"{time.perf_counter() - tic:.2f}",
@@ -304,7 +306,7 @@ def train(
         save_atomic(
             {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
              "optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
-             "best_val": best, "rng": rng.bit_generator.state, "meta": {"train": cfg.to_dict()}},
+             "best_val": best, "rng": rng.bit_generator.state, "meta": {"train": cfg.to_dict(), META_STEP_S: STEP_S}},
             out / "last.pt",
         )
         shown = {} if ade is None else {"ade": f"{ade:.3f}", "fde": f"{fde:.3f}"}  # the latest evaluation

@@ -251,7 +251,7 @@ def test_cli_benchmark_runs_a_suite_and_resumes(tmp_path, capsys):
     assert main(args) == 0
     assert "0 episodes run, 2 already recorded" in capsys.readouterr().out
     assert main(["suites"]) == 0
-    assert "crowdnav-v1 v6: " in capsys.readouterr().out
+    assert "crowdnav-v1 v7: " in capsys.readouterr().out
 
 
 def test_real_cells_give_mpc_gpgraph_the_scenes_leave_one_out_predictor(tmp_path):
@@ -259,19 +259,20 @@ def test_real_cells_give_mpc_gpgraph_the_scenes_leave_one_out_predictor(tmp_path
     scene, a synthetic cell with the default; an explicit predictor wins, and `{scene}` is filled per cell."""
     from envs.policies import make_policy
     from predictor.checkpoint import PACKAGE_CHECKPOINTS
+    from predictor.group_rules import split_group_rule
 
-    def available(name):
-        return (PACKAGE_CHECKPOINTS / f"{name}.safetensors").is_file()
+    def available(spec):  # NAME+RULE: NAME's weights are packaged, the rule is registered
+        return (PACKAGE_CHECKPOINTS / f"{split_group_rule(spec)[0]}.safetensors").is_file()
 
     suite = load_suite("crowdnav-v1")
     cells = suite.select(["real-hotel", "plaza-low-visible"])
     real = suite.cell("real-hotel")
-    assert real.predictor == "gpgraph-stgcnn-hotel" and available(real.predictor)
+    assert real.predictor == "gpgraph-stgcnn-hotel+coherent-motion" and available(real.predictor)
     assert all(available(c.predictor) for c in suite.cells if c.is_real)
     policies = [PolicyConfig("mpc-gpgraph"), PolicyConfig("mpc-cv")]
     plan = plan_benchmark(suite, cells, policies, tmp_path)
     by = {(t.cell, t.policy.name): t.policy for t in plan.tasks}
-    assert by["real-hotel", "mpc-gpgraph"].predictor == "gpgraph-stgcnn-hotel"
+    assert by["real-hotel", "mpc-gpgraph"].predictor == "gpgraph-stgcnn-hotel+coherent-motion"
     assert by["plaza-low-visible", "mpc-gpgraph"].predictor is None  # the shipped synthetic default
     assert by["real-hotel", "mpc-cv"].predictor is None
     explicit = PolicyConfig("mpc-gpgraph", predictor="gpgraph-sgcn-{scene}")

@@ -189,6 +189,12 @@ def test_train_init_starts_from_the_checkpoint_and_records_it(synthetic_data: Pa
     assert meta["train"]["init"] == "gpgraph-stgcnn-synthetic"
 
 
+def synthetic_run(data: Path, tmp: Path) -> Path:
+    """best.pt of a one-epoch run on ``data``."""
+    assert _train(data, tmp / "ok", 1) == 0
+    return tmp / "ok" / "best.pt"
+
+
 def test_data_and_checkpoints_of_another_step_are_refused(synthetic_data: Path, tmp_path: Path, capsys) -> None:
     """A model is trained and served on the ETH/UCY protocol's 0.4 s steps: crowdsim data recorded at 0.2 s
     is refused before training, and a checkpoint that says it was trained at 0.2 s is refused on loading."""
@@ -205,9 +211,8 @@ def test_data_and_checkpoints_of_another_step_are_refused(synthetic_data: Path, 
     assert _train(data, out, 1) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "recorded every 0.2 s" in err and not out.exists()
+    assert read_file(synthetic_run(data=synthetic_data, tmp=tmp_path))["meta"]["step_s"] == 0.4  # training writes it
     ckpt = tmp_path / "m.pt"
-    save_model(GPGraph(GPGraphConfig(backbone="stgcnn")), ckpt)
-    assert read_file(ckpt)["meta"]["step_s"] == 0.4  # what training writes
     save_model(GPGraph(GPGraphConfig(backbone="stgcnn")), ckpt, meta={"step_s": 0.2})
     with pytest.raises(CheckpointError, match=r"0\.2 s apart"):
         load_model(ckpt)
