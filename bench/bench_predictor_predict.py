@@ -2,7 +2,8 @@
 
 Usage: python bench/bench_predictor_predict.py [--threads 1] [--repeats 50]
 Models: GP-Graph-SGCN (the published hotel checkpoint when ../shared is present, else random weights),
-GP-Graph-STGCNN (random weights: latency does not depend on the values) and constant velocity.
+GP-Graph-STGCNN (random weights: latency does not depend on the values), the same grouping by the coherent-motion
+rule instead of its learned assigner (``GPGraph.group_rule``, the env's default grouping) and constant velocity.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ def main() -> None:
     models = {
         "GP-Graph-SGCN": load_predictor(REF) if REF.is_file() else GPGraphPredictor(GPGraph(GPGraphConfig())),
         "GP-Graph-STGCNN": GPGraphPredictor(GPGraph(GPGraphConfig(backbone="stgcnn"))),
+        "STGCNN + rule": GPGraphPredictor(GPGraph(GPGraphConfig(backbone="stgcnn"), group_rule="coherent-motion")),
         "constant velocity": ConstantVelocityPredictor(),
     }
     print(f"threads {args.threads}, K = 20, {args.repeats} calls each; median / p95 ms")
