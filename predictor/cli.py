@@ -22,6 +22,7 @@ import argparse
 import json
 import sys
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -157,17 +158,21 @@ def cmd_groups(args: argparse.Namespace) -> int:
             print(f"note: {note}", file=sys.stderr)
     loaded: dict[str, Any] = {}
 
-    def groups_for(rec: Any) -> Any:
-        name = spec.replace("{scene}", rec.scene)
-        predictor = loaded.get(name) or loaded.setdefault(name, load_predictor(name))
+    def load(name: str) -> Any:
+        if name not in loaded:
+            loaded[name] = load_predictor(name)
+        return loaded[name]
+
+    def groups_by(spec: str, rec: Any) -> Any:
+        predictor = load(spec.replace("{scene}", rec.scene))
         return lambda w: predictor.predict(w.obs, n_samples=1, rng=0).group_id
 
-    results = {}
     for spec in args.predictor:
-        load_predictor(spec.replace("{scene}", recordings[0].scene))  # a bad name fails before any scoring
+        load(spec.replace("{scene}", recordings[0].scene))  # a bad name fails before any scoring
+    results = {}
     print(f"{'predictor':<44} {'recording':<14} {'windows':>7} " + " ".join(f"{k:>16}" for k in GROUP_TABLE_KEYS))
     for spec in args.predictor:
-        results[spec] = validate(recordings, groups_for)
+        results[spec] = validate(recordings, partial(groups_by, spec))
         for rec_name, r in results[spec].items():
             cells = " ".join(f"{r[k]:>16.3f}" for k in GROUP_TABLE_KEYS)
             print(f"{spec:<44} {rec_name:<14} {r['windows']:>7} {cells}")

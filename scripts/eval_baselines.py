@@ -24,11 +24,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.sparse.csgraph import connected_components
 
 from predictor import metrics
 from predictor.cli import split_folder
 from predictor.evaluate import evaluate_constant_velocity as evaluate_cv
+from predictor.group_rules import ProximityRule
 from predictor.metrics import f1
 from predictor.report import nan_to_none
 from predictor.windows import has_labels, load_windows
@@ -38,10 +38,8 @@ PROXIMITY_RADII_M = (0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0)  # the rule family of
 
 def proximity_groups(obs: np.ndarray, radius_m: float, steps: str = "last") -> np.ndarray:
     """Group ids (N,): connected components of pedestrians closer than ``radius_m`` at the last observed step
-    (``steps='last'``) or at every observed step (``steps='all'``) of obs (T, N, 2)."""
-    pts = obs[-1:] if steps == "last" else obs
-    d = np.linalg.norm(pts[:, :, None] - pts[:, None], axis=-1).max(axis=0)
-    return connected_components(d < radius_m, directed=False)[1]
+    (``steps='last'``) or at every observed step (``steps='all'``) of obs (T, N, 2) (`predictor.group_rules`)."""
+    return ProximityRule(radius_m=radius_m, steps="max" if steps == "all" else steps)(obs)
 
 
 def proximity_scores(windows: list) -> dict[str, dict[str, float]]:
