@@ -11,37 +11,24 @@ with the defaults (members do not repel each other as strangers, d0 = 0.6 m) 0.5
 
 from __future__ import annotations
 
-from dataclasses import replace
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from crowdsim.generate import RunSpec, simulate
-from crowdsim.presets import get_preset, sample_config
 from crowdsim.walking import group_pair_geometry
-from predictor.data import Recording
-from predictor.windows import recording_windows
 
 SEEDS = range(4)
 
 
-def _geometry(**group_forces: float) -> tuple[np.ndarray, np.ndarray]:
-    preset = get_preset("realistic-v1")
-    dist, rel = [], []
-    for scenario in ("corridor", "crossing", "plaza", "circle_crossing"):
-        for seed in SEEDS:
-            config = sample_config(preset, scenario, seed)
-            config = replace(config, group_forces=replace(config.group_forces, **group_forces))
-            log, _ = simulate(config, RunSpec(duration_s=48.0, warmup_s=10.0, seed=seed))
-            t = log.table()
-            rec = Recording(path=Path(f"{scenario}_{seed}.txt"), rows=t[:, :4].copy(),
-                            frame_labels=t[:, [0, 1, 4]].copy())
-            for w in recording_windows(rec):
-                d, r = group_pair_geometry(w.obs, w.group_id)
-                dist.append(d)
-                rel.append(r)
-    return np.concatenate(dist), np.concatenate(rel)
+@pytest.fixture(scope="module")
+def measure(load_script):
+    """scripts/measure_group_geometry.geometry: (distance, relative speed) arrays of same-group pairs on SEEDS."""
+    script = load_script("measure_group_geometry")
+
+    def run(**group_forces: float) -> tuple[np.ndarray, np.ndarray]:
+        g = script.geometry(SEEDS, group_forces or None)
+        return g["distance"], g["relative_speed"]
+
+    return run
 
 
 def test_pair_geometry_of_a_walking_pair():
@@ -55,13 +42,13 @@ def test_pair_geometry_of_a_walking_pair():
 
 
 @pytest.mark.slow
-def test_group_members_walk_as_close_as_real_groups():
+def test_group_members_walk_as_close_as_real_groups(measure):
     """Median in-group pair distance within UCY's range of recordings (0.65-0.90 m; pooled 0.74) and the relative
     speed median below the old model's 0.36 m/s (now 0.31; UCY 0.14: what is left of the gap). With the strangers'
     repulsion between members they walked 1.10 m apart."""
-    dist, rel = _geometry()
+    dist, rel = measure()
     assert len(dist) > 5000
     assert 0.65 <= np.median(dist) <= 0.90, f"median in-group distance {np.median(dist):.3f} m"
     assert np.median(rel) <= 0.33, f"median in-group relative speed {np.median(rel):.3f} m/s"
-    old_dist, _ = _geometry(member_ped_repulsion_scale=1.0, repulsion_distance_m=0.8)
+    old_dist, _ = measure(member_ped_repulsion_scale=1.0, repulsion_distance_m=0.8)
     assert np.median(old_dist) > 1.0  # the previous model: the strangers' repulsion kept members apart
