@@ -153,9 +153,6 @@ def cmd_groups(args: argparse.Namespace) -> int:
     if args.json:
         _check_output_file(args.json, ".json")
     recordings = read_annotations(args.data, args.groups, args.group_overlaps, args.absent_ids)
-    for rec in recordings:
-        for note in rec.notes:
-            print(f"note: {note}", file=sys.stderr)
     loaded: dict[str, Any] = {}
 
     def load(name: str) -> Any:
@@ -168,7 +165,10 @@ def cmd_groups(args: argparse.Namespace) -> int:
         return lambda w: predictor.predict(w.obs, n_samples=1, rng=0).group_id
 
     for spec in args.predictor:
-        load(spec.replace("{scene}", recordings[0].scene))  # a bad name fails before any scoring
+        load(spec.replace("{scene}", recordings[0].scene))  # a bad name fails before any scoring or note
+    for rec in recordings:
+        for note in rec.notes:
+            print(f"note: {note}", file=sys.stderr)
     results = {}
     print(f"{'predictor':<44} {'recording':<14} {'windows':>7} " + " ".join(f"{k:>16}" for k in GROUP_TABLE_KEYS))
     for spec in args.predictor:

@@ -54,6 +54,8 @@ CASES = [
     ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/empty"),
     ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/empty --protocol bogus"),
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --threads 0"),
+    ("gpgraph", "groups --groups {tmp}/empty --predictor constant-velocity"),
+    ("gpgraph", "groups --groups {tmp}/empty --predictor constant-velocity+nearest"),
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --epoch 3"),
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/afile/t"),
     ("gpgraph", "train --data {tmp}/empty --out {tmp}/t --resume"),
