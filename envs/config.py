@@ -17,7 +17,7 @@ REPLAY_SCENARIO = "replay"
 # The predictor mpc-gpgraph uses and the observation's predictions come from, unless one is named: the shipped
 # crowdsim-trained GP-Graph (RESULTS.md, "Default synthetic predictor") grouping people by the coherent-motion rule
 # (predictor.group_rules) instead of its learned assigner, which does not transfer to real people: on the UCY group
-# annotations (validation) PW / G-MITRE F1 0.75 / 0.85 pooled against 0.46 / 0.60 (RESULTS.md, "sim-to-real").
+# annotations (validation) PW / G-MITRE F1 0.76 / 0.85 pooled against 0.43 / 0.59 (RESULTS.md, "sim-to-real").
 # Defined here only.
 DEFAULT_PREDICTOR = "gpgraph-stgcnn-synthetic+coherent-motion"
 
