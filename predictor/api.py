@@ -182,7 +182,7 @@ def load_predictor(
             check_group_threshold_scale(group_threshold_scale)
         check_group_mode(group_mode)
         return ConstantVelocityPredictor(group_rule=group_rule)
-    model, _ = load_model(name if spec_rule is not None else name_or_path, backbone=backbone, grouping=grouping,
+    model, _ = load_model(name, backbone=backbone, grouping=grouping,
                           group_threshold_scale=group_threshold_scale, group_mode=group_mode, group_rule=group_rule)
     return GPGraphPredictor(model)
 

@@ -128,15 +128,30 @@ def test_speed_cap_only_touches_fast_rows():
     np.testing.assert_allclose(capped, [[0.6, 0.8], [0.3, 0.4]])
 
 
-def test_fused_kernel_matches_the_numpy_reference_with_groups_walls_and_robot():
-    from crowdsim.config import SimConfig
+def _stepped(config, seed: int, robot: bool = False):
+    """A CrowdSimulator of `config` reset with `seed` and stepped 5 times; with `robot`, a robot 0.6 m beside the
+    first active pedestrian."""
     from crowdsim.sim import CrowdSimulator
 
-    sim = CrowdSimulator(SimConfig(scenario="plaza", n_pedestrians=60))
-    sim.reset(0)
+    sim = CrowdSimulator(config)
+    sim.reset(seed)
     for _ in range(5):
         sim.step()
-    sim.set_robot(sim.slots.pos[np.flatnonzero(sim.slots.active)[0]] + [0.6, 0.0], [0.5, 0.2], 0.3)
+    if robot:
+        sim.set_robot(sim.slots.pos[np.flatnonzero(sim.slots.active)[0]] + [0.6, 0.0], [0.5, 0.2], 0.3)
+    return sim
+
+
+def _assert_kernel_matches_reference(sim) -> None:
+    fast, _ = sim.accelerations()
+    ref, _ = sim.accelerations(reference=True)
+    np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
+
+
+def test_fused_kernel_matches_the_numpy_reference_with_groups_walls_and_robot():
+    from crowdsim.config import SimConfig
+
+    sim = _stepped(SimConfig(scenario="plaza", n_pedestrians=60), 0, robot=True)
     fast, idx = sim.accelerations()
     ref, idx_ref = sim.accelerations(reference=True)
     np.testing.assert_array_equal(idx, idx_ref)
@@ -147,37 +162,23 @@ def test_fused_kernel_matches_the_numpy_reference_with_groups_walls_and_robot():
 @pytest.mark.parametrize("share", [0.0, 0.125, 1.0])
 def test_fused_kernel_matches_the_numpy_reference_for_groups_in_two_rows(share):
     from crowdsim.config import GroupConfig, SimConfig
-    from crowdsim.sim import CrowdSimulator
 
     config = SimConfig(scenario="plaza", n_pedestrians=30, groups=GroupConfig(size_poisson_rate=2.5),
                        group_forces=GroupForceParams(whole_group_gaze_share=share))
-    sim = CrowdSimulator(config)
-    sim.reset(1)
-    for _ in range(5):
-        sim.step()
+    sim = _stepped(config, 1)
     _, labels, gaze = sim._active_index()
     assert (np.bincount(gaze)[gaze] < np.bincount(labels)[labels]).sum() >= 8  # two groups or more in two rows
-    fast, _ = sim.accelerations()
-    ref, _ = sim.accelerations(reference=True)
-    np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
+    _assert_kernel_matches_reference(sim)
 
 
 @pytest.mark.parametrize("scale", [0.0, 0.5, 1.0])
 def test_fused_kernel_matches_the_numpy_reference_with_members_tolerating_each_other(scale):
     from crowdsim.config import GroupConfig, SimConfig
-    from crowdsim.sim import CrowdSimulator
 
     for scenario in ("plaza", "corridor"):  # the corridor is periodic: ghosts carry their source's group label
         config = SimConfig(scenario=scenario, n_pedestrians=40, groups=GroupConfig(size_poisson_rate=2.5),
                            group_forces=GroupForceParams(member_ped_repulsion_scale=scale))
-        sim = CrowdSimulator(config)
-        sim.reset(2)
-        for _ in range(5):
-            sim.step()
-        sim.set_robot(sim.slots.pos[np.flatnonzero(sim.slots.active)[0]] + [0.6, 0.0], [0.5, 0.2], 0.3)
-        fast, _ = sim.accelerations()
-        ref, _ = sim.accelerations(reference=True)
-        np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-10)
+        _assert_kernel_matches_reference(_stepped(config, 2, robot=True))
 
 
 def test_members_of_one_group_repel_each_other_by_the_member_scale_only():
