@@ -247,7 +247,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     suite = load_suite(args.suite)
     cells = suite.select(args.cells.split(",") if args.cells else None)
     args.policy = args.policy or ["mpc-gpgraph", "mpc-cv", "mpc-none", "social-force"]
-    configs = policy_configs(args)
+    configs = policy_configs(args, suite)
     try:
         board = run_benchmark(suite, cells, configs, args.out, data=args.data, workers=args.workers,
                               backend=args.backend, address=args.address, merge=args.merge,
@@ -307,7 +307,10 @@ def _list(command: str) -> int:
 
         for name in suite_names():
             s = load_suite(name)
-            print(f"{s.name} v{s.version}: " + ", ".join(f"{c.name} ({len(c.seeds)})" for c in s.cells))
+            planner = [f"replan every {s.replan_every_steps}"] * (s.replan_every_steps is not None) \
+                + [f"{k}={v}" for k, v in s.mpc]
+            print(f"{s.name} v{s.version}: " + ", ".join(f"{c.name} ({len(c.seeds)})" for c in s.cells)
+                  + (f"; planner: {', '.join(planner)}" if planner else ""))
     return 0
 
 

@@ -12,12 +12,16 @@ from __future__ import annotations
 import argparse
 import os
 from dataclasses import fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from envs.config import DEFAULT_PREDICTOR
 from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from planner import RouteConfig
+
+if TYPE_CHECKING:
+    from envs.evaluation.suite import Suite
 
 # flag -> the `PolicyConfig` field it sets
 FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-every": "replan_every_steps",
@@ -75,15 +79,17 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
                    + ", module:factory (a Policy plug-in) or sb3:PATH.zip (a stable-baselines3 agent)")
     p.add_argument("--predictor", default=None, metavar="NAME",
                    help="for mpc-gpgraph and plug-in policies: predictor name, checkpoint path or module:factory "
-                   "(default: the shipped gpgraph-stgcnn-synthetic)")
+                   f"(default: the shipped {DEFAULT_PREDICTOR})")
     p.add_argument("--samples", type=int, default=DefaultInt(PolicyConfig.n_samples), metavar="K",
                    help="predicted samples per plan (mpc-gpgraph, plug-ins)")
     p.add_argument("--replan-every", type=int, default=DefaultInt(REPLAN_EVERY_STEPS), metavar="STEPS",
-                   help="env steps between re-plans (mpc-gpgraph, mpc-oracle, mpc-cv, mpc-none, plug-ins)")
+                   help="env steps between re-plans (mpc-gpgraph, mpc-oracle, mpc-cv, mpc-none, plug-ins; default 1, "
+                   "or the benchmark suite's planner default)")
     p.add_argument("--threads", type=int, default=DefaultInt(PolicyConfig.threads),
                    help="torch threads per process (mpc-gpgraph, ppo-crowdnav, sb3: agents, plug-ins)")
     p.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE",
-                   help="override an MPCConfig field of the MPC policies (repeatable), e.g. safety_margin_m=0.4")
+                   help="override an MPCConfig field of the MPC policies (repeatable), e.g. safety_margin_m=0.4; on "
+                   "top of the benchmark suite's planner defaults, if it has any (crowdnav suites lists them)")
 
 
 def add_backend_options(p: argparse.ArgumentParser) -> None:
@@ -139,9 +145,10 @@ def _readers(flag: str) -> list[str]:
     return [*names, *(["sb3:PATH.zip"] if flag in SB3_FLAGS else []), "module:factory policies"]
 
 
-def policy_configs(args: argparse.Namespace) -> list[PolicyConfig]:
-    """The `PolicyConfig`s the flags describe, each flag set only for the policies that read it (`flags_read`).
-    ValueError on a bad value, or on a flag that none of the chosen policies reads."""
+def policy_configs(args: argparse.Namespace, suite: Suite | None = None) -> list[PolicyConfig]:
+    """The `PolicyConfig`s the flags describe, each flag set only for the policies that read it (`flags_read`),
+    on top of the benchmark suite's planner defaults (`Suite.replan_every_steps`, `Suite.mpc`) where the flag is
+    not given. ValueError on a bad value, or on a flag that none of the chosen policies reads."""
     if len(set(args.policy)) != len(args.policy):
         raise ValueError("a policy is named twice")
     values = {"--predictor": args.predictor, "--samples": args.samples, "--replan-every": args.replan_every,
@@ -150,8 +157,11 @@ def policy_configs(args: argparse.Namespace) -> list[PolicyConfig]:
     for flag in chosen:
         if not any(flag in flags_read(n) for n in args.policy):
             raise ignored_flag(flag, args.policy, _readers(flag))
-    if "--mpc" in chosen:
-        chosen["--mpc"] = replace(ENV_MPC, **_mpc_overrides(args.mpc))
+    suite_mpc = dict(suite.mpc) if suite is not None else {}
+    if "--mpc" in chosen or suite_mpc:
+        chosen["--mpc"] = replace(ENV_MPC, **{**suite_mpc, **_mpc_overrides(args.mpc or [])})
+    if suite is not None and suite.replan_every_steps is not None and "--replan-every" not in chosen:
+        chosen["--replan-every"] = suite.replan_every_steps
     return [PolicyConfig(name=n, **{FLAG_FIELDS[f]: v for f, v in chosen.items() if f in flags_read(n)})
             for n in args.policy]
 

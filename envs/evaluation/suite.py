@@ -14,6 +14,9 @@ a replay cell with several files replays file (seed mod number of files) from a 
 episodes. A simulated cell may also name its `crowd_model` ("social-force", the default, or "orca":
 `envs.crowd_models`), the ORCA humans' settings `orca` (`envs.orca_crowd.OrcaCrowdConfig` fields) and the robot's
 `robot` (`planner.RobotConfig` fields; default the env's unicycle); unknown names or fields raise naming the valid ones.
+A suite may set `planner` defaults for the planner policies run in it: {"replan_every_steps": k, "mpc": {MPCConfig
+field: value}} (e.g. CrowdNav's 0.25 s decision period, and settings chosen on the suite's tuning twin); the command
+line's --replan-every and --mpc still override them, and every record holds the config it ran.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from typing import Any
 from crowdsim import GroupConfig
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.orca_crowd import OrcaCrowdConfig
-from planner import RobotConfig
+from planner import CROWD_MPC, MPCConfig, RobotConfig
 from predictor.ethucy import DEFAULT_DATA_DIR
 
 DEFAULT_DATA = DEFAULT_DATA_DIR  # predictor.ethucy owns the ETH/UCY data path (ETH_UCY_DIR overrides it)
@@ -38,6 +41,9 @@ _SIM_ONLY_KEYS = {"crowd_model", "orca", "robot"}  # simulated cells only
 _NESTED = {"orca": OrcaCrowdConfig, "robot": RobotConfig}  # cell key -> the frozen config its fields build
 SIMULATED_SCENE = "synthetic"
 _DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m", "spawn_contact_ends_episode"}
+_PLANNER_KEYS = {"replan_every_steps", "mpc"}
+# MPCConfig fields a suite may set (scalars; the robot comes from the cell, the weights and route stay the env's)
+_SUITE_MPC_FIELDS = {f.name for f in fields(MPCConfig)} - {"robot", "weights", "route"}
 
 
 def suite_names() -> list[str]:
@@ -107,6 +113,8 @@ class Suite:
     version: int
     description: str
     cells: tuple[Cell, ...]
+    replan_every_steps: int | None = None  # planner policies' default here (None: the registry's)
+    mpc: tuple[tuple[str, Any], ...] = ()  # MPCConfig overrides for the planner policies here, (field, value)
 
     def cell(self, name: str) -> Cell:
         for c in self.cells:
@@ -177,13 +185,34 @@ def parse_suite(data: dict[str, Any], origin: str = "suite") -> Suite:
         names = [c.name for c in cells]
         if len(set(names)) != len(names):
             raise ValueError(f"{origin}: cell names repeat")
-        suite = Suite(str(data["name"]), int(data["version"]), str(data.get("description", "")), tuple(cells))
+        replan, mpc = _planner_defaults(data.get("planner", {}), origin)
+        suite = Suite(str(data["name"]), int(data["version"]), str(data.get("description", "")), tuple(cells),
+                      replan, mpc)
     except (KeyError, TypeError) as exc:
         raise ValueError(f"{origin}: malformed suite ({exc!r})") from exc
     for cell in suite.cells:  # every simulated cell's config must be valid
         if not cell.is_real:
             cell.env_config(cell.seeds[0]).sim_config()
     return suite
+
+
+def _planner_defaults(spec: Any, origin: str) -> tuple[int | None, tuple[tuple[str, Any], ...]]:
+    """(replan_every_steps, mpc overrides) of a suite's "planner" entry; ValueError naming the problem."""
+    if not isinstance(spec, dict) or set(spec) - _PLANNER_KEYS:
+        raise ValueError(f"{origin}: planner must map {sorted(_PLANNER_KEYS)} to values, got {spec!r}")
+    replan = spec.get("replan_every_steps")
+    if replan is not None and (not isinstance(replan, int) or isinstance(replan, bool) or replan < 1):
+        raise ValueError(f"{origin}: planner.replan_every_steps must be an integer >= 1, got {replan!r}")
+    mpc = spec.get("mpc", {})
+    if not isinstance(mpc, dict) or set(mpc) - _SUITE_MPC_FIELDS:
+        bad = sorted(set(mpc) - _SUITE_MPC_FIELDS) if isinstance(mpc, dict) else mpc
+        raise ValueError(f"{origin}: planner.mpc sets unknown or fixed MPCConfig field(s) {bad}; valid: "
+                         f"{', '.join(sorted(_SUITE_MPC_FIELDS))}")
+    try:
+        replace(CROWD_MPC, **mpc)  # the values are checked where they would be used
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{origin}: planner.mpc: {exc}") from exc
+    return replan, tuple(sorted(mpc.items()))
 
 
 def load_suite(name: str) -> Suite:

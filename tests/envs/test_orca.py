@@ -15,7 +15,7 @@ from envs.cli import main
 from envs.crowd import rows_of
 from envs.evaluation.suite import load_suite, parse_suite
 from envs.orca_crowd import OrcaCrowd, OrcaCrowdConfig
-from envs.policies import decide, make_policy
+from envs.policies import ENV_MPC, PolicyConfig, decide, make_policy
 from envs.rvo import OrcaParams, load_pyrvo, orca_velocities, pref_velocity
 from planner import RobotConfig
 
@@ -210,3 +210,27 @@ def test_each_crowdnav_setting_has_a_tuning_suite_with_the_same_episodes_rules_a
     assert cell.spec | {"name": "", "seed0": 0, "episodes": 0} == ref.spec | {"name": "", "seed0": 0, "episodes": 0}
     assert min(cell.seeds) > max(ref.seeds)
     assert cell.env_config(cell.seeds[0]) == ref.env_config(cell.seeds[0])  # one seed, one episode, in either suite
+    assert (tune.replan_every_steps, tune.mpc) == (reported.replan_every_steps, reported.mpc)  # the planner's too
+
+
+def test_a_suites_planner_defaults_reach_the_planner_policies_and_the_command_line_overrides_them():
+    from envs.cli import build_parser
+    from envs.cli_options import policy_configs
+
+    cell = {"name": "x", "scenario": "circle_crossing", "n_pedestrians": 5, "robot_visible": False, "episodes": 1,
+            "seed0": 0}
+    suite = parse_suite({"name": "s", "version": 1, "cells": [cell],
+                         "planner": {"replan_every_steps": 5, "mpc": {"clearance_growth_mps": 0.0}}})
+    parse = build_parser().parse_args
+    cv, sf = policy_configs(parse(["benchmark", "--suite", "s", "--out", "x", "--policy", "mpc-cv", "social-force"]),
+                            suite)
+    assert (cv.replan_every_steps, cv.mpc.clearance_growth_mps) == (5, 0.0)
+    assert cv.mpc == replace(ENV_MPC, clearance_growth_mps=0.0)  # nothing else changes
+    assert sf == PolicyConfig("social-force")  # a policy that reads neither keeps its defaults, and no error
+    (cv,) = policy_configs(parse(["benchmark", "--suite", "s", "--out", "x", "--policy", "mpc-cv", "--replan-every",
+                                  "2", "--mpc", "clearance_growth_mps=0.1", "--mpc", "safety_margin_m=0.4"]), suite)
+    assert (cv.replan_every_steps, cv.mpc.clearance_growth_mps, cv.mpc.safety_margin_m) == (2, 0.1, 0.4)
+    for bad, needle in [({"mpc": {"robot": {}}}, "unknown or fixed"), ({"mpc": {"dt_s": -1.0}}, "dt_s"),
+                        ({"replan_every_steps": 0}, "integer >= 1"), ({"policy": 1}, "planner must map")]:
+        with pytest.raises(ValueError, match=needle):
+            parse_suite({"name": "s", "version": 1, "cells": [cell], "planner": bad})
