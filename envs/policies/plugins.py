@@ -16,6 +16,8 @@ Protocols (also in docs/envs.md; the README has a worked example):
 SB3 agents load without unpickling Python objects from the file (`sb3_files`): pickled settings are replaced
 (spaces by the env's, schedules by constants, policy_kwargs rebuilt with allow-listed classes), the weights load
 with `weights_only=True`, and an agent trained on another observation layout is refused with the mismatch named.
+An agent trained with a decision period of k env steps (`crowdnav train --decision-every-steps k`, recorded in its
+file) acts every k steps here too and holds its action in between.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.policies.sb3_files import SB3_ALGOS, load_agent
+from envs.policies.sb3_files import SB3_ALGOS, decision_period, load_agent, read_agent
 from envs.view import Decision, PolicyView
 
 SB3_PREFIX = "sb3:"
@@ -45,7 +47,8 @@ def parse_sb3(spec: str) -> tuple[str, Path]:
 
 
 class SB3Policy:
-    """A stable-baselines3 agent acting on the env's observation (deterministic by default)."""
+    """A stable-baselines3 agent acting on the env's observation (deterministic by default), every
+    `decision_every_steps` env steps (its recorded decision period), holding its action in between."""
 
     reads_history = False  # it reads `view.obs` only
 
@@ -56,8 +59,11 @@ class SB3Policy:
         set_threads(threads)
         try:
             self.model = load_agent(path, algo, env)
+            self.decision_every_steps = decision_period(read_agent(path)[1])
         except ValueError as exc:
             raise ValueError(f"{spec!r}: {exc}") from exc
+        self._action: np.ndarray | None = None
+        self._age = 0  # env steps since the held action was chosen
         self.name, self.deterministic = f"sb3:{path.stem}", deterministic
         try:  # a model trained on another observation layout fails here, not mid-episode
             self.model.predict(env.observation_space.sample(), deterministic=True)
@@ -65,8 +71,11 @@ class SB3Policy:
             raise ValueError(f"{path}: the agent does not fit this env's observation space ({exc})") from exc
 
     def reset(self, seed: int | None = None) -> None:
-        pass
+        self._action, self._age = None, 0
 
     def act(self, view: PolicyView) -> Decision:
-        action, _ = self.model.predict(view.obs, deterministic=self.deterministic)
-        return Decision(action=np.asarray(action, np.float32).reshape(2))
+        if self._action is None or self._age >= self.decision_every_steps:
+            action, _ = self.model.predict(view.obs, deterministic=self.deterministic)
+            self._action, self._age = np.asarray(action, np.float32).reshape(2), 0
+        self._age += 1
+        return Decision(action=self._action.copy())

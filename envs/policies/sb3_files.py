@@ -7,7 +7,9 @@ and the weights as `.pth` files. Here nothing pickled is ever loaded:
 - the weights load with `torch.load(weights_only=True)` (SB3's loader);
 - agents saved here carry `crowdnav.json` (the env's observation signature, `envs.observation.signature`, and
   training metadata); an agent whose signature differs from the env's is refused with the mismatch named. For
-  other SB3 files the keys and shapes are read from the readable copy of the observation space.
+  other SB3 files the keys and shapes are read from the readable copy of the observation space;
+- the metadata's `decision_every_steps` (`DECISION_KEY`) is the agent's decision period: it acted every k env
+  steps and held its action in between while training (`decision_period`; absent, as in older agents: 1).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from envs.config import CrowdNavConfig
 from envs.observation import mismatches, signature
 
 LAYOUT_ENTRY = "crowdnav.json"
+DECISION_KEY = "decision_every_steps"  # in crowdnav.json's "meta": env steps per agent decision
 SB3_ALGOS = ("PPO", "A2C", "SAC", "TD3", "DDPG")
 # Entries SB3 would unpickle that are safe to replace: SB3's default policy for a Dict observation and its
 # default buffers (None), constant schedules (only used when training) and no training state.
@@ -58,6 +61,15 @@ def read_agent(path: Path) -> tuple[dict[str, Any], dict[str, Any] | None]:
             return json.loads(z.read("data")), layout
     except (OSError, zipfile.BadZipFile, KeyError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not a stable-baselines3 model file ({exc})") from exc
+
+
+def decision_period(layout: dict[str, Any] | None) -> int:
+    """Env steps per decision of an agent from its `crowdnav.json` entry (`read_agent`); 1 when not recorded.
+    ValueError when the recorded value is not an integer >= 1."""
+    value = ((layout or {}).get("meta") or {}).get(DECISION_KEY, 1)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+        raise ValueError(f"{DECISION_KEY} must be an integer >= 1, got {value!r}")
+    return value
 
 
 def _class(name: str) -> Any:

@@ -2,6 +2,7 @@
 
 - `train`: `crowdnav train` (PPO, optional DAgger/behaviour-cloning warm start, resumable);
 - `monitor`: progress, evaluation and checkpoints during training;
+- `setting`: training in a benchmark suite's cell, seeds disjoint from the suites', the decision period wrapper;
 - `imitation`: expert demonstrations and behaviour cloning;
 - `extractor`: the set-aware features extractor (attention over pedestrians).
 

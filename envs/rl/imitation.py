@@ -28,13 +28,15 @@ from envs.policies import PolicyConfig, act, make_policy
 @dataclass
 class Demos:
     """Demonstrations: obs {key: (S, ...)} float32, actions (S, 2) in [-1, 1], returns (S,) discounted,
-    episode_outcome (E,) strings, episode_seed (E,)."""
+    episode_outcome (E,) strings, episode_seed (E,); S counts decision steps, one every `decision_every_steps` env
+    steps (files saved before it was recorded: 1)."""
 
     obs: dict[str, np.ndarray]
     actions: np.ndarray
     returns: np.ndarray
     episode_outcome: np.ndarray
     episode_seed: np.ndarray
+    decision_every_steps: int = 1
 
     @property
     def success_rate(self) -> float:
@@ -43,7 +45,8 @@ class Demos:
     def save(self, path: str | Path) -> None:
         """Written atomically (`envs.atomic`): a reader sees the old file or the complete new one."""
         arrays = {"actions": self.actions, "returns": self.returns, "episode_outcome": self.episode_outcome,
-                  "episode_seed": self.episode_seed, **{f"obs.{k}": v for k, v in self.obs.items()}}
+                  "episode_seed": self.episode_seed, "decision_every_steps": np.array(self.decision_every_steps),
+                  **{f"obs.{k}": v for k, v in self.obs.items()}}
 
         def write(tmp: str) -> None:
             with open(tmp, "wb") as f:  # a file object: np.savez would append .npz to a bare name
@@ -57,15 +60,21 @@ class Demos:
         try:
             with np.load(path, allow_pickle=False) as z:
                 obs = {k[4:]: z[k] for k in z.files if k.startswith("obs.")}
-                return cls(obs, z["actions"], z["returns"], z["episode_outcome"], z["episode_seed"])
+                every = int(z["decision_every_steps"]) if "decision_every_steps" in z.files else 1
+                return cls(obs, z["actions"], z["returns"], z["episode_outcome"], z["episode_seed"], every)
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"{path}: not a demonstrations file ({exc})") from exc
 
 
 def _episode(env: CrowdNavEnv, expert: Any, seed: int, gamma: float, learner: Any = None,
-             beta: float = 1.0, rng: np.random.Generator | None = None) -> tuple[dict, np.ndarray, np.ndarray, str]:
-    """One episode labelled by the expert. Each step executes the expert's action with probability beta, else
-    the learner's (an SB3 policy, deterministic); the expert's action is always the label."""
+             beta: float = 1.0, rng: np.random.Generator | None = None,
+             every: int = 1) -> tuple[dict, np.ndarray, np.ndarray, str]:
+    """One episode labelled by the expert, deciding every `every` env steps. At each decision step the expert's
+    action is the label, and the action executed (and held for `every` env steps, or until the episode ends) is the
+    expert's with probability beta, else the learner's (an SB3 policy, deterministic). The expert is asked at every
+    env step, so that its own clock runs (a planner built with `replan_every_steps` = `every` re-plans exactly at
+    the decision steps); its answers in between are not used. Returns per decision step: observation, label and
+    the discounted return (per decision, of the rewards summed over its env steps)."""
     obs, _ = env.reset(seed=seed)
     expert.reset(seed)
     observations, actions, rewards, done, info = [], [], [], False, {}
@@ -76,9 +85,16 @@ def _episode(env: CrowdNavEnv, expert: Any, seed: int, gamma: float, learner: An
             action = np.asarray(learner.predict(obs, deterministic=True)[0], np.float32).reshape(2)
         observations.append(obs)
         actions.append(label)
-        obs, reward, terminated, truncated, info = env.step(action)
-        rewards.append(reward)
-        done = terminated or truncated
+        total = 0.0
+        for k in range(every):
+            if k:
+                act(expert, env)  # the expert's clock; the held action runs
+            obs, reward, terminated, truncated, info = env.step(action)
+            total += reward
+            done = terminated or truncated
+            if done:
+                break
+        rewards.append(total)
     returns = np.zeros(len(rewards))
     acc = 0.0
     for i in range(len(rewards) - 1, -1, -1):
@@ -92,30 +108,35 @@ def _chunk(args: tuple) -> list[tuple[dict, np.ndarray, np.ndarray, str]]:
     from predictor import set_threads
 
     set_threads(1)
-    config, policy, seeds, gamma, learner, beta = args
+    config, policy, seeds, gamma, learner, beta, every = args
     if learner is not None:  # (class, constructor kwargs, state dict) -> the SB3 policy in this process
         cls, kwargs, state = learner
         learner = cls(**kwargs)
         learner.load_state_dict(state)
         learner.set_training_mode(False)
     env = CrowdNavEnv(config)
-    expert = make_policy(PolicyConfig(name=policy), env)
+    expert = make_policy(PolicyConfig(name=policy, replan_every_steps=every), env)
     rng = np.random.default_rng(seeds[0])
-    return [_episode(env, expert, s, gamma, learner, beta, rng) for s in seeds]
+    return [_episode(env, expert, s, gamma, learner, beta, rng, every) for s in seeds]
 
 
 def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes: int = 60, seed: int = 0,
-                  gamma: float = 0.99, workers: int = 1, learner: Any = None, beta: float = 1.0) -> Demos:
-    """`episodes` episodes labelled by `policy` (seeds seed .. seed + episodes - 1) over `workers` processes.
-    With a `learner` (an SB3 policy), each step runs the learner's action with probability 1 - beta (DAgger);
+                  gamma: float = 0.99, workers: int = 1, learner: Any = None, beta: float = 1.0,
+                  every: int = 1) -> Demos:
+    """`episodes` episodes labelled by `policy` (seeds seed .. seed + episodes - 1) over `workers` processes, at
+    a decision every `every` env steps (`_episode`; a planner expert re-plans every `every` steps). With a
+    `learner` (an SB3 policy), each decision runs the learner's action with probability 1 - beta (DAgger);
     `episode_outcome` is then the outcome of the executed (mixed) episode."""
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
+    if not isinstance(every, int) or every < 1:
+        raise ValueError(f"every must be an integer >= 1, got {every!r}")
     seeds = list(range(seed, seed + episodes))
     if learner is not None:  # sent to the workers as its constructor and detached weights
         learner = (type(learner), learner._get_constructor_parameters(),
                    {k: v.detach().clone() for k, v in learner.state_dict().items()})
-    chunks = [(config, policy, seeds[i::workers], gamma, learner, beta) for i in range(workers) if seeds[i::workers]]
+    chunks = [(config, policy, seeds[i::workers], gamma, learner, beta, every) for i in range(workers)
+              if seeds[i::workers]]
     if len(chunks) == 1:
         parts = [_chunk(chunks[0])]
     else:  # crowdsim's pool: a worker that dies (OOM) is replaced and its chunk rerun
@@ -131,14 +152,37 @@ def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes:
     obs = {k: np.concatenate([e[0][k] for e in eps]) for k in eps[0][0]}
     return Demos(obs, np.concatenate([e[1] for e in eps]).astype(np.float32),
                  np.concatenate([e[2] for e in eps]).astype(np.float32),
-                 np.array([e[3] for e in eps]), np.array([s for s, _ in order]))
+                 np.array([e[3] for e in eps]), np.array([s for s, _ in order]), every)
+
+
+def check_demos(path: str | Path, config: CrowdNavConfig, every: int = 1) -> None:
+    """ValueError unless `path` holds demonstrations recorded in `config`'s observation layout, deciding every
+    `every` env steps, on episodes that no benchmark suite reports (`envs.rl.setting.suite_seed_ranges`)."""
+    from envs.observation import observation_space
+    from envs.rl.setting import suite_seed_ranges
+
+    demos = Demos.load(path)
+    want = {k: tuple(b.shape) for k, b in observation_space(config).spaces.items()}
+    have = {k: tuple(v.shape[1:]) for k, v in demos.obs.items()}
+    if want != have:
+        raise ValueError(f"--demos {path}: recorded with observation {have}, this run observes {want}")
+    if demos.decision_every_steps != every:
+        raise ValueError(f"--demos {path}: recorded deciding every {demos.decision_every_steps} env steps, this run "
+                         f"every {every}")
+    reported = sorted({int(s) for s in demos.episode_seed for _, r in suite_seed_ranges() if s in r})
+    if reported:
+        raise ValueError(f"--demos {path}: episodes of seeds {reported[:5]}{' ...' if len(reported) > 5 else ''} "
+                         "are reported by a benchmark suite; demonstrate on other seeds")
 
 
 def concat(a: Demos, b: Demos) -> Demos:
-    """The union of two demonstration sets (DAgger's aggregate)."""
+    """The union of two demonstration sets (DAgger's aggregate); ValueError when their decision periods differ."""
+    if a.decision_every_steps != b.decision_every_steps:
+        raise ValueError(f"demonstrations at decision periods {a.decision_every_steps} and {b.decision_every_steps} "
+                         "env steps do not mix")
     return Demos({k: np.concatenate([a.obs[k], b.obs[k]]) for k in a.obs}, np.concatenate([a.actions, b.actions]),
                  np.concatenate([a.returns, b.returns]), np.concatenate([a.episode_outcome, b.episode_outcome]),
-                 np.concatenate([a.episode_seed, b.episode_seed]))
+                 np.concatenate([a.episode_seed, b.episode_seed]), a.decision_every_steps)
 
 
 def behaviour_clone(model: Any, demos: Demos, epochs: int = 30, batch_size: int = 256, lr: float = 1e-3,

@@ -17,7 +17,7 @@ from envs.atomic import write_json_atomic
 from envs.env import CrowdNavEnv
 from envs.evaluation.episode import episode_record, run_episode
 from envs.evaluation.stats import aggregate
-from envs.policies.sb3_files import load_parameters, save_agent
+from envs.policies.sb3_files import DECISION_KEY, load_parameters, save_agent
 from envs.view import Decision, PolicyView
 
 EVAL_FIELDS = ("steps", "wall_s", "success", "collision", "timeout", "mean_return", "time_to_goal_s",
@@ -33,19 +33,25 @@ def tensorboard_available() -> bool:
 
 
 class ModelPolicy:
-    """A model being trained, as a harness policy (deterministic actions)."""
+    """A model being trained, as a harness policy (deterministic actions), deciding every `every` env steps and
+    holding its action in between (as it acts in training, and as `SB3Policy` runs the saved agent)."""
 
     reads_history = False  # it reads `view.obs` only
 
-    def __init__(self, model: Any, name: str = "ppo") -> None:
-        self.model, self.name = model, name
+    def __init__(self, model: Any, name: str = "ppo", every: int = 1) -> None:
+        self.model, self.name, self.every = model, name, every
+        self._action: np.ndarray | None = None
+        self._age = 0
 
     def reset(self, seed: int | None = None) -> None:
-        pass
+        self._action, self._age = None, 0
 
     def act(self, view: PolicyView) -> Decision:
-        action, _ = self.model.predict(view.obs, deterministic=True)
-        return Decision(action=np.asarray(action, np.float32).reshape(2))
+        if self._action is None or self._age >= self.every:
+            action, _ = self.model.predict(view.obs, deterministic=True)
+            self._action, self._age = np.asarray(action, np.float32).reshape(2), 0
+        self._age += 1
+        return Decision(action=self._action.copy())
 
 
 def finite_parameters(model: Any) -> bool:
@@ -105,7 +111,7 @@ class TrainMonitor(BaseCallback):
     # ------------------------------------------------------------------------------------ evaluation
     def evaluate(self, model: Any) -> dict[str, float]:
         """Deterministic episodes on the eval seeds, harness metrics; appends a row to eval.csv."""
-        policy = ModelPolicy(model)
+        policy = ModelPolicy(model, every=self.cfg.decision_every_steps)
         seeds = range(self.cfg.eval_seed, self.cfg.eval_seed + self.cfg.eval_episodes)
         records = [episode_record(run_episode(self.env_config, "", s, env=self.eval_env, policy=policy), policy.name, s)
                    for s in seeds]
@@ -141,7 +147,7 @@ class TrainMonitor(BaseCallback):
 
     def _meta(self, model: Any) -> dict[str, Any]:
         return {"steps": int(model.num_timesteps), "wall_s": round(self.wall_s, 1), "train_config": self.cfg.to_json(),
-                **self.extra}
+                DECISION_KEY: self.cfg.decision_every_steps, **self.extra}
 
     def checkpoint(self) -> None:
         meta = self._meta(self.model)

@@ -3,6 +3,8 @@
     crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --steps 1000000 --out out/train/cc5
     crowdnav train --config run.toml --warm-start bc          # flags override the file's values
     crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint
+    crowdnav train --suite crowdnav-classic --decision-every-steps 5 --warm-start dagger --demo-policy mpc-cv
+                                                               # a benchmark cell's env, a decision every 0.25 s
 
 It reads top to bottom: the settings (`TrainConfig`), the vectorised envs, the SB3 PPO model with the
 set-aware extractor (`envs.rl.extractor`), an optional warm start by behaviour cloning of the MPC
@@ -10,8 +12,17 @@ set-aware extractor (`envs.rl.extractor`), an optional warm start by behaviour c
 evaluates the deterministic agent with the harness metrics every `eval_every_steps` on seeds it never trained
 on, and saves checkpoints atomically. Out folder: config.json, progress.csv + tb/ (SB3's logger: CSV and
 TensorBoard), eval.csv, demos.npz, checkpoints/{latest,best}.zip (+ state.json), final.zip.
-Training resets draw episodes from the streams of seeds seed .. seed + envs - 1; evaluation uses explicit
-seeds eval_seed .. eval_seed + eval_episodes - 1 (default 100000+), so it never replays a training episode.
+
+The env is either built from --scenario/--pedestrians/--invisible/--time-limit-s, or is a simulated cell of a
+benchmark suite (--suite, --cell; `envs.rl.setting`): the cell's env config (crowd model, robot, dt, time limit)
+with this run's observation and reward settings; `crowdnav benchmark --suite S --policy sb3:OUT/final.zip` then
+evaluates the agent on the suite's own episodes. No run ever trains or selects on a suite's episodes: training
+resets draw episodes from the streams of seeds 10000000 + seed .. + envs - 1 (`TRAIN_SEED_OFFSET`), evaluation
+uses seeds eval_seed .. eval_seed + eval_episodes - 1 (default 100000+), demonstrations demo_seed onwards (default
+200000+); these ranges are checked to be disjoint from each other and from every shipped suite's seeds.
+--decision-every-steps k: the agent acts every k env steps and holds its action in between (CrowdNav: every 0.25
+s, 5 steps of 0.05 s); steps (--steps, --n-steps, --eval-every-steps, ...) then count the agent's decisions. The
+saved agent records k, and the harness's sb3: policy acts at the same period; demonstrations are collected at it.
 """
 
 from __future__ import annotations
@@ -29,18 +40,31 @@ from typing import Any
 
 from envs.atomic import write_json_atomic
 from envs.config import CrowdNavConfig, ObservationConfig, RewardWeights
+from envs.rl.setting import TRAIN_SEED_OFFSET, add_setting_arguments, check_disjoint, check_seeds, suite_env_config
 
 WARM_STARTS = ("none", "bc", "dagger")
+# The env settings of a run without a suite (None in TrainConfig: not given). With a suite they come from its cell,
+# and giving any of them is an error.
+SCENARIO_DEFAULTS: dict[str, Any] = {"scenario": "circle_crossing", "pedestrians": 5, "invisible": True,
+                                     "time_limit_s": 40.0}
+# --quick: a smoke run of the whole pipeline (warm start, PPO, evaluation, checkpoints), not a usable agent.
+QUICK: dict[str, Any] = {"total_steps": 4096, "n_steps": 256, "eval_every_steps": 2048, "eval_episodes": 5,
+                         "checkpoint_every_steps": 2048, "demo_episodes": 5, "bc_epochs": 5, "dagger_rounds": 1,
+                         "dagger_episodes": 3}
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Everything a run depends on (saved as config.json; defaults run). Steps are env steps."""
+    """Everything a run depends on (saved as config.json; defaults run). Steps are agent steps (decisions), each
+    `decision_every_steps` env steps."""
 
-    scenario: str = "circle_crossing"
-    pedestrians: int = 5
-    invisible: bool = True            # pedestrians do not see the robot (CrowdNav's invisible setting)
-    time_limit_s: float = 40.0
+    suite: str = ""                   # train in a simulated cell of this benchmark suite ("": the four below)
+    cell: str = ""                    # the suite's cell ("": its only cell)
+    scenario: str | None = None       # None: circle_crossing (without a suite)
+    pedestrians: int | None = None    # None: 5
+    invisible: bool | None = None     # pedestrians do not see the robot (CrowdNav's invisible setting); None: True
+    time_limit_s: float | None = None  # s; None: 40
+    decision_every_steps: int = 1     # env steps per agent decision; the action is held in between
     max_pedestrians: int = 20         # P rows in the observation
     groups: bool = True               # the extractor pools rows by group id
     predictions: bool = False         # predicted futures in the observation and the extractor
@@ -74,7 +98,8 @@ class TrainConfig:
     threads: int = 1                  # torch threads in the learner process
 
     def __post_init__(self) -> None:
-        ints = ("pedestrians", "max_pedestrians", "total_steps", "envs", "workers", "n_steps", "batch_size",
+        self._resolve_env_fields()
+        ints = ("decision_every_steps", "max_pedestrians", "total_steps", "envs", "workers", "n_steps", "batch_size",
                 "n_epochs", "demo_episodes", "bc_epochs", "dagger_rounds", "dagger_episodes", "eval_every_steps",
                 "eval_episodes", "checkpoint_every_steps", "threads")
         for name in ints:
@@ -92,15 +117,61 @@ class TrainConfig:
         if not (0 < self.gamma <= 1 and 0 < self.gae_lambda <= 1 and self.learning_rate > 0 and self.clip_range > 0):
             raise ValueError("gamma and gae_lambda must be in (0, 1], learning_rate and clip_range > 0")
         self.env_config().sim_config()  # validates the scenario, crowd size (against the group sizes), rewards
+        seeds = self.seed_ranges()
+        for what, r in seeds.items():
+            check_seeds(what, r)
+        check_disjoint(seeds)
+
+    def _resolve_env_fields(self) -> None:
+        """Fill the env settings left None (no suite) with `SCENARIO_DEFAULTS`; with a suite, refuse any given."""
+        if not isinstance(self.suite, str) or not isinstance(self.cell, str):
+            raise ValueError("suite and cell must be names (strings)")
+        if self.cell and not self.suite:
+            raise ValueError(f"cell {self.cell!r} needs its suite (--suite)")
+        if self.suite:
+            given = ["--" + k.replace("_", "-") for k in SCENARIO_DEFAULTS if getattr(self, k) is not None]
+            if given:
+                raise ValueError(f"suite {self.suite}: its cell sets the env, so {', '.join(given)} would be ignored; "
+                                 "drop them")
+            return
+        for key, value in SCENARIO_DEFAULTS.items():
+            if getattr(self, key) is None:
+                object.__setattr__(self, key, value)
+        if not isinstance(self.pedestrians, int) or self.pedestrians < 1:
+            raise ValueError(f"pedestrians must be an integer >= 1, got {self.pedestrians!r}")
+
+    def seed_ranges(self) -> dict[str, range]:
+        """The reset seeds of every episode this run draws: training (the first reset of each env; later resets
+        continue each env's random stream), evaluation, and demonstrations (BC and DAgger; none without a warm
+        start)."""
+        demos = 0 if self.warm_start == "none" else self.demo_episodes
+        if self.warm_start == "dagger":
+            demos += self.dagger_rounds * self.dagger_episodes
+        first = TRAIN_SEED_OFFSET + self.seed
+        return {"training seeds (10000000 + seed)": range(first, first + self.envs),
+                "eval_seed": range(self.eval_seed, self.eval_seed + self.eval_episodes),
+                "demo_seed": range(self.demo_seed, self.demo_seed + demos)}
+
+    @property
+    def env_cell(self) -> str:
+        """The suite cell trained in ("" without a suite)."""
+        return suite_env_config(self.suite, self.cell)[0] if self.suite else ""
 
     def env_config(self) -> CrowdNavConfig:
-        """The env every training and evaluation episode runs in."""
+        """The env every training and evaluation episode runs in: the suite cell's (with this run's observation
+        and reward weights), or the one the scenario fields describe."""
         names = {"progress": "progress_per_m", "success": "success", "collision": "collision",
                  "discomfort": "discomfort_per_s", "group_intrusion": "group_intrusion_per_s", "time": "time_per_s"}
         unknown = [k for k, _ in self.rewards if k not in names]
         if unknown:
             raise ValueError(f"unknown reward term(s) {unknown}; valid: {', '.join(names)}")
-        weights = replace(RewardWeights(), **{names[k]: float(v) for k, v in self.rewards})
+        overrides = {names[k]: float(v) for k, v in self.rewards}
+        if self.suite:
+            _, cfg = suite_env_config(self.suite, self.cell)
+            obs = replace(cfg.observation, max_pedestrians=self.max_pedestrians, predictions=self.predictions,
+                          wall_rays=self.wall_rays)
+            return replace(cfg, observation=obs, rewards=replace(cfg.rewards, **overrides))
+        weights = replace(RewardWeights(), **overrides)
         obs = ObservationConfig(max_pedestrians=self.max_pedestrians, predictions=self.predictions,
                                 wall_rays=self.wall_rays)
         return CrowdNavConfig(scenario=self.scenario, n_pedestrians=self.pedestrians,
@@ -127,17 +198,21 @@ class TrainConfig:
 
 # ------------------------------------------------------------------------------------------ the run
 def make_vec_env(cfg: TrainConfig) -> Any:
-    """`cfg.envs` monitored envs stepped in this process (workers 1) or in `cfg.envs` subprocesses."""
+    """`cfg.envs` monitored envs stepped in this process (workers 1) or in `cfg.envs` subprocesses, each deciding
+    every `decision_every_steps` env steps (`DecisionPeriod`); env i first resets with seed 10000000 + seed + i."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from envs.env import CrowdNavEnv
+    from envs.rl.setting import DecisionPeriod
 
     env_cfg = cfg.env_config()
     vec_cls = DummyVecEnv if cfg.workers == 1 else SubprocVecEnv
     kwargs = {"start_method": "forkserver"} if cfg.workers > 1 else None
-    return sb3_make_vec_env(CrowdNavEnv, n_envs=cfg.envs, seed=cfg.seed, vec_env_cls=vec_cls,
-                            env_kwargs={"config": env_cfg}, vec_env_kwargs=kwargs)
+    wrapper = {"wrapper_class": DecisionPeriod, "wrapper_kwargs": {"every": cfg.decision_every_steps}} \
+        if cfg.decision_every_steps > 1 else {}
+    return sb3_make_vec_env(CrowdNavEnv, n_envs=cfg.envs, seed=TRAIN_SEED_OFFSET + cfg.seed, vec_env_cls=vec_cls,
+                            env_kwargs={"config": env_cfg}, vec_env_kwargs=kwargs, **wrapper)
 
 
 def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
@@ -148,10 +223,12 @@ def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
     policy_kwargs = {"features_extractor_class": CrowdAttentionExtractor,
                      "features_extractor_kwargs": {"use_groups": cfg.groups, "use_predictions": cfg.predictions},
                      "net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": cfg.log_std_init}
-    return PPO("MultiInputPolicy", vec_env, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
-               learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-               ent_coef=cfg.ent_coef, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs, seed=cfg.seed,
-               device="cpu", verbose=0)
+    model = PPO("MultiInputPolicy", vec_env, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+                learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
+                ent_coef=cfg.ent_coef, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs, seed=cfg.seed,
+                device="cpu", verbose=0)
+    vec_env.seed(TRAIN_SEED_OFFSET + cfg.seed)  # PPO(seed=) re-seeded the envs' next resets with seed + i
+    return model
 
 
 def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None) -> dict[str, Any]:
@@ -166,7 +243,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     else:
         print(f"collecting {cfg.demo_episodes} {cfg.demo_policy} demonstrations ...", flush=True)
         demos = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.demo_episodes, cfg.demo_seed, cfg.gamma,
-                              workers=workers)
+                              workers=workers, every=cfg.decision_every_steps)
         demos.save(out / "demos.npz")
     info: dict[str, Any] = {"demo_steps": len(demos.actions), "demo_episodes": len(demos.episode_seed),
                             "demo_success_rate": demos.success_rate}
@@ -177,7 +254,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     for r in range(cfg.dagger_rounds if cfg.warm_start == "dagger" else 0):
         seed = cfg.demo_seed + cfg.demo_episodes + r * cfg.dagger_episodes
         new = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.dagger_episodes, seed, cfg.gamma, workers,
-                            learner=model.policy, beta=0.0)
+                            learner=model.policy, beta=0.0, every=cfg.decision_every_steps)
         demos = concat(demos, new)
         losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, reset_log_std=cfg.log_std_init, seed=cfg.seed + r)
         rounds.append({"learner_success": new.success_rate, "steps": len(demos.actions), "loss": losses[-1]})
@@ -230,30 +307,32 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
 
 
 def check_demos(path: Path, cfg: TrainConfig) -> None:
-    """ValueError unless `path` holds demonstrations recorded in this run's observation layout."""
-    from envs.observation import observation_space
-    from envs.rl.imitation import Demos
+    """ValueError unless `path` holds demonstrations for this run (`envs.rl.imitation.check_demos`)."""
+    from envs.rl.imitation import check_demos as check
 
-    demos = Demos.load(path)
-    space = observation_space(cfg.env_config())
-    want = {k: tuple(b.shape) for k, b in space.spaces.items()}
-    have = {k: tuple(v.shape[1:]) for k, v in demos.obs.items()}
-    if want != have:
-        raise ValueError(f"--demos {path}: recorded with observation {have}, this run observes {want}")
+    check(path, cfg.env_config(), cfg.decision_every_steps)
 
 
 # ------------------------------------------------------------------------------------------ command line
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, metavar="TOML", help="settings file (TrainConfig fields)")
-    p.add_argument("--out", type=Path, default=None, metavar="DIR", help="run folder (default out/train/<scenario>)")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+                   help="run folder (default out/train/<scenario or cell>)")
     p.add_argument("--resume", type=Path, default=None, metavar="DIR", help="resume the run in DIR")
     p.add_argument("--demos", type=Path, default=None, metavar="NPZ", help="reuse demonstrations for --warm-start bc")
-    flags = {"scenario": str, "pedestrians": int, "time_limit_s": float, "max_pedestrians": int, "wall_rays": int,
+    p.add_argument("--quick", action="store_true",
+                   help="a short smoke run (about a minute on a laptop CPU; not a usable agent): "
+                        + ", ".join(f"{k} {v}" for k, v in QUICK.items()) + "; other flags override these")
+    add_setting_arguments(p)
+    for name, typ in {"scenario": str, "pedestrians": int, "time_limit_s": float}.items():
+        p.add_argument("--" + name.replace("_", "-"), type=typ, default=argparse.SUPPRESS, dest=name,
+                       help=f"without --suite (default: {SCENARIO_DEFAULTS[name]})")
+    flags = {"max_pedestrians": int, "wall_rays": int,
              "total_steps": int, "seed": int, "envs": int, "workers": int, "n_steps": int, "batch_size": int,
              "n_epochs": int, "learning_rate": float, "gamma": float, "ent_coef": float,
              "target_kl": float, "log_std_init": float,
-             "warm_start": str, "demo_policy": str, "demo_episodes": int, "bc_epochs": int, "dagger_rounds": int,
-             "dagger_episodes": int,
+             "warm_start": str, "demo_policy": str, "demo_episodes": int, "demo_seed": int, "bc_epochs": int,
+             "dagger_rounds": int, "dagger_episodes": int,
              "eval_every_steps": int, "eval_episodes": int, "eval_seed": int, "checkpoint_every_steps": int,
              "threads": int}
     defaults = TrainConfig()
@@ -261,8 +340,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=argparse.SUPPRESS, dest=name,
                        help=f"(default: {getattr(defaults, name)})")
     p.add_argument("--steps", type=int, default=argparse.SUPPRESS, dest="total_steps",
-                   help=f"total env steps, alias of --total-steps (default: {defaults.total_steps})")
-    for name in ("invisible", "groups", "predictions"):
+                   help=f"total agent steps (decisions), alias of --total-steps (default: {defaults.total_steps})")
+    p.add_argument("--invisible", action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, dest="invisible",
+                   help=f"without --suite (default: {SCENARIO_DEFAULTS['invisible']})")
+    for name in ("groups", "predictions"):
         p.add_argument(f"--{name}", action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, dest=name,
                        help=f"(default: {getattr(defaults, name)})")
     p.add_argument("--reward", action="append", default=None, metavar="TERM=WEIGHT",
@@ -287,8 +368,10 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
             raise ValueError(f"--config {args.config}: {exc}") from exc
     fields = {f.name for f in dataclasses.fields(TrainConfig)} - {"rewards"}
     given = {k: v for k, v in vars(args).items() if k in fields}
-    if args.resume is not None and set(given) - {"total_steps"}:
+    if args.resume is not None and (set(given) - {"total_steps"} or getattr(args, "quick", False)):
         raise ValueError(f"--resume keeps the run's settings; only --steps may change (got {sorted(given)})")
+    if getattr(args, "quick", False):
+        data.update(QUICK)
     data.update(given)
     if args.reward:
         rewards = dict(data.get("rewards", {}))
@@ -303,7 +386,7 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
         raise ValueError("--demos is used only with --warm-start bc or dagger")
     if args.demos is not None:
         check_demos(args.demos, cfg)
-    out = args.resume or args.out or Path("out/train") / cfg.scenario
+    out = args.resume or args.out or Path("out/train") / (cfg.env_cell or str(cfg.scenario))
     if args.resume is None and (out / "checkpoints" / "latest.zip").exists():
         raise ValueError(f"{out} already holds a run; use --resume {out} or another --out")
     return cfg, out, args.resume is not None
