@@ -108,25 +108,26 @@ def _chunk(args: tuple) -> list[tuple[dict, np.ndarray, np.ndarray, str]]:
     from predictor import set_threads
 
     set_threads(1)
-    config, policy, seeds, gamma, learner, beta, every = args
+    config, policy, seeds, gamma, learner, beta, every, mpc = args
     if learner is not None:  # (class, constructor kwargs, state dict) -> the SB3 policy in this process
         cls, kwargs, state = learner
         learner = cls(**kwargs)
         learner.load_state_dict(state)
         learner.set_training_mode(False)
     env = CrowdNavEnv(config)
-    expert = make_policy(PolicyConfig(name=policy, replan_every_steps=every), env)
+    expert = make_policy(PolicyConfig(name=policy, replan_every_steps=every, **({"mpc": mpc} if mpc else {})), env)
     rng = np.random.default_rng(seeds[0])
     return [_episode(env, expert, s, gamma, learner, beta, rng, every) for s in seeds]
 
 
 def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes: int = 60, seed: int = 0,
                   gamma: float = 0.99, workers: int = 1, learner: Any = None, beta: float = 1.0,
-                  every: int = 1) -> Demos:
+                  every: int = 1, mpc: Any = None) -> Demos:
     """`episodes` episodes labelled by `policy` (seeds seed .. seed + episodes - 1) over `workers` processes, at
     a decision every `every` env steps (`_episode`; a planner expert re-plans every `every` steps). With a
     `learner` (an SB3 policy), each decision runs the learner's action with probability 1 - beta (DAgger);
-    `episode_outcome` is then the outcome of the executed (mixed) episode."""
+    `episode_outcome` is then the outcome of the executed (mixed) episode. `mpc` (a `planner.MPCConfig`): the
+    expert MPC's settings (None: the env's, `envs.policies.ENV_MPC`), e.g. a benchmark suite's planner defaults."""
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     if not isinstance(every, int) or every < 1:
@@ -135,7 +136,7 @@ def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes:
     if learner is not None:  # sent to the workers as its constructor and detached weights
         learner = (type(learner), learner._get_constructor_parameters(),
                    {k: v.detach().clone() for k, v in learner.state_dict().items()})
-    chunks = [(config, policy, seeds[i::workers], gamma, learner, beta, every) for i in range(workers)
+    chunks = [(config, policy, seeds[i::workers], gamma, learner, beta, every, mpc) for i in range(workers)
               if seeds[i::workers]]
     if len(chunks) == 1:
         parts = [_chunk(chunks[0])]

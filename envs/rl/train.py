@@ -231,6 +231,17 @@ def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
     return model
 
 
+def expert_mpc(cfg: TrainConfig) -> Any:
+    """The demonstrating MPC's settings: in a suite, the env's MPC with the suite's planner defaults (what
+    `crowdnav benchmark` runs there); else None (the env's MPC)."""
+    if not cfg.suite:
+        return None
+    from envs.evaluation.suite import load_suite
+    from envs.policies import ENV_MPC
+
+    return replace(ENV_MPC, **dict(load_suite(cfg.suite).mpc))
+
+
 def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None) -> dict[str, Any]:
     """Behaviour cloning of the demo policy (demos from `demos_path`, or collected and saved to out/demos.npz),
     then for "dagger" `dagger_rounds` rounds of learner roll-outs labelled by the expert (seeds after the
@@ -243,7 +254,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     else:
         print(f"collecting {cfg.demo_episodes} {cfg.demo_policy} demonstrations ...", flush=True)
         demos = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.demo_episodes, cfg.demo_seed, cfg.gamma,
-                              workers=workers, every=cfg.decision_every_steps)
+                              workers=workers, every=cfg.decision_every_steps, mpc=expert_mpc(cfg))
         demos.save(out / "demos.npz")
     info: dict[str, Any] = {"demo_steps": len(demos.actions), "demo_episodes": len(demos.episode_seed),
                             "demo_success_rate": demos.success_rate}
@@ -254,7 +265,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     for r in range(cfg.dagger_rounds if cfg.warm_start == "dagger" else 0):
         seed = cfg.demo_seed + cfg.demo_episodes + r * cfg.dagger_episodes
         new = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.dagger_episodes, seed, cfg.gamma, workers,
-                            learner=model.policy, beta=0.0, every=cfg.decision_every_steps)
+                            learner=model.policy, beta=0.0, every=cfg.decision_every_steps, mpc=expert_mpc(cfg))
         demos = concat(demos, new)
         losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, reset_log_std=cfg.log_std_init, seed=cfg.seed + r)
         rounds.append({"learner_success": new.success_rate, "steps": len(demos.actions), "loss": losses[-1]})

@@ -239,3 +239,13 @@ def test_an_agent_trained_in_a_suite_cell_keeps_its_decision_period_in_the_bench
     from envs.evaluation.episode import _CACHE
 
     assert [r.policy.decision_every_steps for r in _CACHE.values() if r.policy_name.startswith("sb3:")] == [5]
+
+
+def test_the_demonstrating_mpc_runs_the_suites_planner_settings():
+    """In a suite the expert is the MPC that `crowdnav benchmark` runs there (crowdnav-classic: a fixed clearance)."""
+    from envs.policies import ENV_MPC
+    from envs.rl.train import expert_mpc
+
+    assert expert_mpc(TrainConfig()) is None  # no suite: the env's MPC
+    mpc = expert_mpc(TrainConfig(suite="crowdnav-classic"))
+    assert mpc == replace(ENV_MPC, clearance_growth_mps=0.0) and ENV_MPC.clearance_growth_mps > 0
