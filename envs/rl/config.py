@@ -1,0 +1,164 @@
+"""The settings of a training run (`TrainConfig`, saved as config.json): the env it trains in (a scenario, or a
+benchmark suite's cell), PPO's hyper-parameters, the warm start and the evaluation; `envs.rl.train` runs it."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, replace
+from typing import Any
+
+from envs.config import CrowdNavConfig, ObservationConfig, RewardWeights
+from envs.rl.setting import TRAIN_SEED_OFFSET, check_disjoint, check_seeds, suite_env_config
+
+WARM_STARTS = ("none", "bc", "dagger")
+# The env settings of a run without a suite (None in TrainConfig: not given). With a suite they come from its cell,
+# and giving any of them is an error.
+SCENARIO_DEFAULTS: dict[str, Any] = {"scenario": "circle_crossing", "pedestrians": 5, "invisible": True,
+                                     "time_limit_s": 40.0}
+# --quick: a smoke run of the whole pipeline (warm start, PPO, evaluation, checkpoints), not a usable agent.
+QUICK: dict[str, Any] = {"total_steps": 4096, "n_steps": 256, "eval_every_steps": 2048, "eval_episodes": 5,
+                         "checkpoint_every_steps": 2048, "demo_episodes": 5, "bc_epochs": 5, "dagger_rounds": 1,
+                         "dagger_episodes": 3}
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a run depends on (saved as config.json; defaults run). Steps are agent steps (decisions), each
+    `decision_every_steps` env steps."""
+
+    suite: str = ""                   # train in a simulated cell of this benchmark suite ("": the four below)
+    cell: str = ""                    # the suite's cell ("": its only cell)
+    scenario: str | None = None       # None: circle_crossing (without a suite)
+    pedestrians: int | None = None    # None: 5
+    invisible: bool | None = None     # pedestrians do not see the robot (CrowdNav's invisible setting); None: True
+    time_limit_s: float | None = None  # s; None: 40
+    decision_every_steps: int = 1     # env steps per agent decision; the action is held in between
+    max_pedestrians: int = 20         # P rows in the observation
+    groups: bool = True               # the extractor pools rows by group id
+    predictions: bool = False         # predicted futures in the observation and the extractor
+    wall_rays: int = 0                # range rays to the walls in the observation (0: none)
+    rewards: tuple[tuple[str, float], ...] = ()  # RewardWeights overrides, e.g. (("collision", -20.0),)
+    total_steps: int = 1_000_000
+    seed: int = 0
+    envs: int = 8                     # parallel envs in the rollout
+    workers: int = 1                  # 1: all envs in this process; = envs: one subprocess per env (SB3)
+    n_steps: int = 256                # rollout length per env
+    batch_size: int = 256
+    n_epochs: int = 10
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    target_kl: float | None = None   # stop an update's epochs once the approximate KL passes 1.5x this
+    log_std_init: float = -0.5
+    warm_start: str = "none"          # "bc": behaviour cloning of demo_policy before PPO; "dagger": then DAgger
+    demo_policy: str = "mpc-gpgraph"
+    demo_episodes: int = 60
+    demo_seed: int = 200_000
+    bc_epochs: int = 30
+    dagger_rounds: int = 3            # DAgger: roll the learner out, expert labels, clone again on the aggregate
+    dagger_episodes: int = 30         # learner episodes per DAgger round
+    eval_every_steps: int = 100_000
+    eval_episodes: int = 30
+    eval_seed: int = 100_000
+    checkpoint_every_steps: int = 50_000
+    threads: int = 1                  # torch threads in the learner process
+
+    def __post_init__(self) -> None:
+        self._resolve_env_fields()
+        ints = ("decision_every_steps", "max_pedestrians", "total_steps", "envs", "workers", "n_steps", "batch_size",
+                "n_epochs", "demo_episodes", "bc_epochs", "dagger_rounds", "dagger_episodes", "eval_every_steps",
+                "eval_episodes", "checkpoint_every_steps", "threads")
+        for name in ints:
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        if self.warm_start not in WARM_STARTS:
+            raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
+        if self.workers not in (1, self.envs):
+            raise ValueError(f"workers must be 1 (all envs in this process) or equal to envs ({self.envs}: one "
+                             f"subprocess per env, SB3's SubprocVecEnv), got {self.workers}")
+        if not isinstance(self.wall_rays, int) or self.wall_rays < 0:
+            raise ValueError(f"wall_rays must be an integer >= 0, got {self.wall_rays!r}")
+        if self.target_kl is not None and not self.target_kl > 0:
+            raise ValueError(f"target_kl must be > 0 (or unset), got {self.target_kl}")
+        if not (0 < self.gamma <= 1 and 0 < self.gae_lambda <= 1 and self.learning_rate > 0 and self.clip_range > 0):
+            raise ValueError("gamma and gae_lambda must be in (0, 1], learning_rate and clip_range > 0")
+        self.env_config().sim_config()  # validates the scenario, crowd size (against the group sizes), rewards
+        seeds = self.seed_ranges()
+        for what, r in seeds.items():
+            check_seeds(what, r)
+        check_disjoint(seeds)
+
+    def _resolve_env_fields(self) -> None:
+        """Fill the env settings left None (no suite) with `SCENARIO_DEFAULTS`; with a suite, refuse any given."""
+        if not isinstance(self.suite, str) or not isinstance(self.cell, str):
+            raise ValueError("suite and cell must be names (strings)")
+        if self.cell and not self.suite:
+            raise ValueError(f"cell {self.cell!r} needs its suite (--suite)")
+        if self.suite:
+            given = ["--" + k.replace("_", "-") for k in SCENARIO_DEFAULTS if getattr(self, k) is not None]
+            if given:
+                raise ValueError(f"suite {self.suite}: its cell sets the env, so {', '.join(given)} would be ignored; "
+                                 "drop them")
+            return
+        for key, value in SCENARIO_DEFAULTS.items():
+            if getattr(self, key) is None:
+                object.__setattr__(self, key, value)
+        if not isinstance(self.pedestrians, int) or self.pedestrians < 1:
+            raise ValueError(f"pedestrians must be an integer >= 1, got {self.pedestrians!r}")
+
+    def seed_ranges(self) -> dict[str, range]:
+        """The reset seeds of every episode this run draws: training (the first reset of each env; later resets
+        continue each env's random stream), evaluation, and demonstrations (BC and DAgger; none without a warm
+        start)."""
+        demos = 0 if self.warm_start == "none" else self.demo_episodes
+        if self.warm_start == "dagger":
+            demos += self.dagger_rounds * self.dagger_episodes
+        first = TRAIN_SEED_OFFSET + self.seed
+        return {"training seeds (10000000 + seed)": range(first, first + self.envs),
+                "eval_seed": range(self.eval_seed, self.eval_seed + self.eval_episodes),
+                "demo_seed": range(self.demo_seed, self.demo_seed + demos)}
+
+    @property
+    def env_cell(self) -> str:
+        """The suite cell trained in ("" without a suite)."""
+        return suite_env_config(self.suite, self.cell)[0] if self.suite else ""
+
+    def env_config(self) -> CrowdNavConfig:
+        """The env every training and evaluation episode runs in: the suite cell's (with this run's observation
+        and reward weights), or the one the scenario fields describe."""
+        names = {"progress": "progress_per_m", "success": "success", "collision": "collision",
+                 "discomfort": "discomfort_per_s", "group_intrusion": "group_intrusion_per_s", "time": "time_per_s"}
+        unknown = [k for k, _ in self.rewards if k not in names]
+        if unknown:
+            raise ValueError(f"unknown reward term(s) {unknown}; valid: {', '.join(names)}")
+        overrides = {names[k]: float(v) for k, v in self.rewards}
+        if self.suite:
+            _, cfg = suite_env_config(self.suite, self.cell)
+            obs = replace(cfg.observation, max_pedestrians=self.max_pedestrians, predictions=self.predictions,
+                          wall_rays=self.wall_rays)
+            return replace(cfg, observation=obs, rewards=replace(cfg.rewards, **overrides))
+        weights = replace(RewardWeights(), **overrides)
+        obs = ObservationConfig(max_pedestrians=self.max_pedestrians, predictions=self.predictions,
+                                wall_rays=self.wall_rays)
+        return CrowdNavConfig(scenario=self.scenario, n_pedestrians=self.pedestrians,
+                              robot_visible=not self.invisible, time_limit_s=self.time_limit_s, rewards=weights,
+                              observation=obs)
+
+    def to_json(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["rewards"] = {k: v for k, v in self.rewards}
+        return d
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> TrainConfig:
+        """A config from JSON/TOML data; unknown keys are an error."""
+        fields = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - fields)
+        if unknown:
+            raise ValueError(f"unknown setting(s) {unknown}; valid: {', '.join(sorted(fields))}")
+        data = dict(data)
+        if "rewards" in data:
+            data["rewards"] = tuple((str(k), float(v)) for k, v in dict(data["rewards"]).items())
+        return cls(**data)
