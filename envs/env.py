@@ -108,7 +108,9 @@ class CrowdNavEnv(gym.Env):
             self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
         self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
         self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels, start=tuple(start), goal=tuple(self.goal),
-                                      goal_tolerance_m=cfg.goal_tolerance_m, dt_s=cfg.dt_s)
+                                      goal_tolerance_m=cfg.goal_tolerance_m, dt_s=cfg.dt_s,
+                                      robot_radius_m=cfg.robot.radius_m)
+        self.metrics.observe_people(self._peds())
         self._spawns.reset()
         self._done = False
         self._annotations = {}
@@ -167,6 +169,7 @@ class CrowdNavEnv(gym.Env):
                             facts.min_surface_distance_m, cfg.discomfort_distance_m, facts.intruding)
         self.metrics.spawn_contacts = self._spawns.count
         self.metrics.observe(self.robot_state[:2], facts.social)
+        self.metrics.observe_people(self._peds())
         # 5. terminated, 6. truncated
         terminated = facts.collided or facts.reached_goal
         truncated = (not terminated) and self.steps >= cfg.max_steps
@@ -388,4 +391,5 @@ class CrowdNavEnv(gym.Env):
             m.success, m.time_to_goal_s = True, m.time_s
         elif truncated:
             m.timeout = True
+        m.continue_people(self._peds(), getattr(self.crowd, "future", None))  # ITR's horizon past the end
         self._done = True

@@ -3,19 +3,56 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from envs.kernels import min_time_to_collision
 from envs.social_metrics import (
+    ITR_OFFSETS_S,
     ZONES,
+    FutureIntrusions,
+    future_intrusions,
     group_contact,
     mean_jerk,
     path_irregularity,
     spl,
     zone_of,
 )
+
+if TYPE_CHECKING:
+    from envs.view import Pedestrians
+
+
+@dataclass
+class PeopleTrack:
+    """The people of each state of an episode, appended state by state: per state their ids (n,), positions (n, 2) m
+    and radii (n,) m."""
+
+    states: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+
+    def add(self, ped_id: np.ndarray, pos: np.ndarray, radius: np.ndarray) -> None:
+        self.states.append((np.array(ped_id, np.int64), np.array(pos, float).reshape(-1, 2),
+                            np.array(radius, float).reshape(-1)))
+
+    def dense(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(S, U, 2) positions m (NaN where absent), (S, U) bool presence and (S, U) radii m (NaN where absent):
+        one column per person (U distinct ids, ascending), one row per state."""
+        ids = [s[0] for s in self.states]
+        counts = np.array([len(i) for i in ids])
+        flat = np.concatenate(ids) if ids else np.zeros(0, np.int64)
+        unique = np.unique(flat)
+        rows, cols = np.repeat(np.arange(len(ids)), counts), np.searchsorted(unique, flat)
+        pos = np.full((len(ids), len(unique), 2), np.nan)
+        radius = np.full((len(ids), len(unique)), np.nan)
+        present = np.zeros((len(ids), len(unique)), bool)
+        if len(flat):
+            pos[rows, cols] = np.concatenate([s[1] for s in self.states])
+            radius[rows, cols] = np.concatenate([s[2] for s in self.states])
+            present[rows, cols] = True
+        return pos, present, radius
 
 
 @dataclass
@@ -46,6 +83,9 @@ class EpisodeMetrics:
     path_irregularity_rad, jerk_mps3: None when undefined (no moving step; fewer than 3 steps).
     min_ttc_s: the smallest constant-velocity time to collision over the episode, s (inf: never on a course).
     spl: success weighted by path length (start, goal, goal_tolerance_m: the route; None before any `observe`).
+    itr, itr_states, itr_sd_m: CrowdNav++'s intrusion ratio (fraction of the T + 1 states), its intruding states
+        and the social distance during intrusions (m; None without any), from the robot's positions and `people`
+        (`observe_people` at reset and every step, `continue_people` at the end; None when people were not observed).
     """
 
     steps: int = 0
@@ -70,7 +110,9 @@ class EpisodeMetrics:
     zone_steps: dict[str, int] = field(default_factory=lambda: dict.fromkeys(ZONES, 0))
     min_ttc_s: float = math.inf
     group_contact: bool = False
+    robot_radius_m: float = 0.0
     positions: list[tuple[float, float]] = field(default_factory=list, repr=False)
+    people: PeopleTrack = field(default_factory=PeopleTrack, repr=False)
 
     def update(self, dt_s: float, moved_m: float, min_surface_m: float, comfort_m: float, intruding: bool) -> None:
         self.steps += 1
@@ -91,6 +133,33 @@ class EpisodeMetrics:
         self.min_ttc_s = min(self.min_ttc_s, social.ttc_s)
         self.group_contact |= social.group_contact
 
+    def observe_people(self, peds: Pedestrians) -> None:
+        """The people in the scene at a state (at reset, then after every step): `envs.view.Pedestrians`."""
+        self.people.add(peds.ped_id, peds.pos, peds.radius)
+
+    def continue_people(self, peds: Pedestrians, future: Callable[[np.ndarray, np.ndarray], np.ndarray] | None) -> None:
+        """At the episode's end: where the people present now (`peds`) go next, as far as ITR's horizon needs past
+        the last checked state, from `future(ped_ids, times_s)` ((K, N, 2) m, NaN once gone: `Crowd.future`); a
+        crowd that cannot tell (None) leaves the horizon of the last states short."""
+        k = math.ceil(max(ITR_OFFSETS_S) / self.dt_s - 1.0 - 1e-9) if self.dt_s > 0 else 0
+        if future is None or k <= 0 or not self.people.states:
+            return
+        ahead = future(peds.ped_id, self.dt_s * np.arange(1, k + 1))
+        if ahead is None:  # (a crowd class that declares `Crowd.future` without implementing it)
+            return
+        for rows in np.asarray(ahead, float).reshape(k, len(peds.ped_id), 2):
+            here = ~np.isnan(rows).any(axis=1)
+            self.people.add(peds.ped_id[here], rows[here], peds.radius[here])
+
+    def intrusions(self) -> FutureIntrusions | None:
+        """CrowdNav++'s intrusions of the episode so far (`future_intrusions`); None before the people of every
+        robot state were observed."""
+        xy = np.array(self.positions, float).reshape(-1, 2)
+        if not len(xy) or len(self.people.states) < len(xy) or self.dt_s <= 0:
+            return None
+        pos, present, radius = self.people.dense()
+        return future_intrusions(xy, pos, radius, self.robot_radius_m, self.dt_s, present)
+
     def social_dict(self) -> dict[str, float | bool | None]:
         """The social-navigation metrics (see the class docstring)."""
         out: dict[str, float | bool | None] = {}
@@ -103,6 +172,9 @@ class EpisodeMetrics:
                    jerk_mps3=mean_jerk(xy, self.dt_s) if self.dt_s > 0 else None, min_ttc_s=self.min_ttc_s,
                    spl=spl(self.success, self.start, self.goal, self.path_length_m, self.goal_tolerance_m)
                    if self.positions else None)  # (no observed step: no route to measure against)
+        itr = self.intrusions()
+        out.update(itr=None if itr is None else itr.ratio, itr_states=None if itr is None else itr.count,
+                   itr_sd_m=None if itr is None else itr.social_distance_m)
         return out
 
     @property

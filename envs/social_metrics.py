@@ -18,12 +18,17 @@ Bad input (NaN where a value is needed, wrong shapes, dt <= 0) raises ValueError
 - jerk: mean over time of the magnitude of the third finite difference of position / dt**3 (SocNavBench), m/s^3.
 - SPL: success * l / max(p, l), l = the straight start-goal distance minus the goal tolerance (Anderson et al.
   2018 with the shortest path taken as the straight line to the goal region), p the path travelled.
+- ITR / SD (CrowdNav++, Liu et al. 2023; Shuijing725/CrowdNav_Prediction_AttnGraph): a state intrudes when the
+  robot, where it is now, is closer than the radii sum to where a person present now will be 0.25, 0.5, ..., 1.25 s
+  later (centre distances); ITR = intruding states / all T + 1 states of the episode (the terminal one counts,
+  never intrudes), SD = the smallest such centre distance of an intruding state (`future_intrusions`).
 """
 
 from __future__ import annotations
 
 import bisect
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -254,3 +259,81 @@ def spl(success: bool, start: np.ndarray, goal: np.ndarray, path_length_m: float
     if not success:
         return 0.0
     return 1.0 if length == 0.0 else length / max(p, length)
+
+
+# ------------------------------------------------------------------------------------------ CrowdNav++ ITR / SD
+# CrowdNav++ (rl/evaluation.py; crowd_sim/envs/crowd_sim_var_num.py, calc_reward): its Danger zone is the humans'
+# true positions predict_steps = 5 steps of pred_timestep = 0.25 s ahead (crowd_nav/configs/config.py)
+ITR_OFFSETS_S: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.25)
+_SNAP = 1e-9  # an offset within this many steps of a whole step is that step (0.25 / 0.05 is not exactly 5)
+_BLOCK = 256  # states per block in `future_intrusions`
+
+
+@dataclass(frozen=True)
+class FutureIntrusions:
+    """CrowdNav++'s intrusions of one episode (`future_intrusions`).
+
+    intruding: (T,) bool per checked state 0 .. T-1 (the terminal state T is never checked).
+    min_distance_m: (T,) m, per intruding state the smallest centre distance among its intruding (offset, person)
+        pairs; NaN where the state does not intrude.
+    states: T + 1, the states of the episode, terminal included (CrowdNav++'s step count).
+    """
+
+    intruding: np.ndarray
+    min_distance_m: np.ndarray
+    states: int
+
+    @property
+    def count(self) -> int:
+        """Intruding states."""
+        return int(np.count_nonzero(self.intruding))
+
+    @property
+    def ratio(self) -> float:
+        """ITR as a fraction in [0, 1] (CrowdNav++ prints it x 100, %): intruding states / `states`."""
+        return self.count / self.states
+
+    @property
+    def social_distance_m(self) -> float | None:
+        """SD, m: the mean of `min_distance_m` over the intruding states; None without any."""
+        return float(np.nanmean(self.min_distance_m)) if self.count else None
+
+
+def future_intrusions(robot: np.ndarray, people: np.ndarray, people_radius_m: np.ndarray, robot_radius_m: float,
+                      dt_s: float, present: np.ndarray | None = None,
+                      offsets_s: tuple[float, ...] = ITR_OFFSETS_S) -> FutureIntrusions:
+    """CrowdNav++'s intrusions: state k (time k dt_s, k = 0 .. T-1) intrudes when, for a person present at state k
+    and at time k dt_s + o (o in `offsets_s`, s), |people(k dt_s + o) - robot[k]| < robot_radius_m + the person's
+    radius. robot (T + 1, 2) m at the states 0 .. T (T steps; state T, the terminal one, is not checked);
+    people (S, N, 2) m at the states 0 .. S-1 (S >= T + 1: the states after T continue the crowd past the episode's
+    end), each column one person, present (S, N) bool; people_radius_m (N,) or (S, N) m. A time between two states
+    is interpolated linearly (both must hold the person); times past state S-1 do not count."""
+    robot = _array("robot", robot, (None, 2))
+    raw = np.asarray(people, dtype=float)
+    people, mask = _people(raw, len(raw) if raw.ndim else 0, present)
+    radii = _radii("people_radius_m", people_radius_m, mask)
+    t, s = len(robot) - 1, len(people)
+    if t < 0 or s < t + 1:
+        raise ValueError(f"need robot (T + 1, 2) with T >= 0 and people of at least T + 1 states, got {t + 1}, {s}")
+    dt = _dt(dt_s)
+    off = np.asarray(offsets_s, float)
+    if off.ndim != 1 or not np.all(np.isfinite(off)) or np.any(off <= 0):
+        raise ValueError(f"offsets_s must be positive and finite, got {offsets_s!r}")
+    pos = np.where(mask[..., None], people, 0.0)
+    reach = np.where(mask, radii, 0.0) + _radius("robot_radius_m", robot_radius_m)  # (S, N) contact distance, m
+    closest = np.full(t, np.inf)
+    for k0 in range(0, t, _BLOCK):  # blocks of states: (block, J, N, 2) arrays stay small on long, crowded replays
+        k = np.arange(k0, min(k0 + _BLOCK, t))
+        at = k[:, None] + off[None] / dt  # (K, J) fractional state index of each future time
+        near = np.rint(at)
+        at = np.where(np.abs(at - near) < _SNAP, near, at)
+        lo = np.minimum(np.floor(at).astype(np.int64), s - 1)
+        hi, w = np.minimum(lo + 1, s - 1), (at - lo)[..., None]  # w (K, J, 1)
+        ok = mask[k, None, :] & (at <= s - 1)[..., None] & mask[lo] & (mask[hi] | (w == 0.0))
+        future = (1.0 - w[..., None]) * pos[lo] + w[..., None] * pos[hi]  # (K, J, N, 2)
+        dist = np.linalg.norm(future - robot[k, None, None], axis=-1)
+        hit = ok & (dist < reach[lo])
+        if hit.size:
+            closest[k] = np.where(hit, dist, np.inf).min(axis=(1, 2))
+    intruding = np.isfinite(closest)
+    return FutureIntrusions(intruding, np.where(intruding, closest, np.nan), t + 1)

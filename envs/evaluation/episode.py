@@ -145,6 +145,7 @@ def social_fields(m: dict[str, Any]) -> dict[str, Any]:
     ttc = m.get("min_ttc_s")
     out["collision_course"] = None if ttc is None else bool(math.isfinite(ttc))
     out["group_collision"] = None if m.get("group_collision") is None else bool(m["group_collision"])
+    out["itr_states"] = None if m.get("itr_states") is None else int(m["itr_states"])
     return out
 
 

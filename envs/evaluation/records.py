@@ -24,10 +24,11 @@ AT_FAULT = ("robot", "pedestrian", "spawn")
 AVOIDABLE_AT_FAULT = ("robot", "pedestrian")
 # Record fields renamed since records were first written: old name -> new name (old files still load).
 RENAMED_FIELDS = {"collision_kind": "at_fault"}
-# The float-valued social-navigation fields (`envs.social_metrics`); with group_collision and collision_course,
-# every field a record written before them lacks (they load as None: "n/a").
+# The float-valued social-navigation fields (`envs.social_metrics`); with group_collision, collision_course and
+# itr_states, every field a record written before them lacks (they load as None: "n/a").
 SOCIAL_FLOAT_FIELDS = ("time_intimate_s", "intimate_fraction", "time_personal_s", "personal_fraction",
-                       "time_social_s", "social_fraction", "path_irregularity_rad", "jerk_mps3", "min_ttc_s", "spl")
+                       "time_social_s", "social_fraction", "path_irregularity_rad", "jerk_mps3", "min_ttc_s", "spl",
+                       "itr", "itr_sd_m")
 
 
 def finite_or_none(value: Any) -> float | None:
@@ -57,7 +58,10 @@ class EpisodeRecord:
     fraction of the episode's steps with the nearest person in that Hall zone; group_collision, contact with a
     member of a group of >= 2 (None also without group labels); path_irregularity_rad; jerk_mps3 (m/s^3);
     min_ttc_s, the smallest time to collision (s), with collision_course False when the robot was never on one
-    (then min_ttc_s is None: JSON has no inf; `min_ttc` gives inf); spl, success weighted by path length.
+    (then min_ttc_s is None: JSON has no inf; `min_ttc` gives inf); spl, success weighted by path length;
+    itr, CrowdNav++'s intrusion ratio (fraction of the episode's states with the robot closer than the radii sum
+    to where a person will be 0.25-1.25 s later, `social_metrics.future_intrusions`), itr_states its intruding
+    states and itr_sd_m the social distance during them (mean smallest centre distance, m; None without any).
     """
 
     policy: str
@@ -92,6 +96,9 @@ class EpisodeRecord:
     min_ttc_s: float | None = None
     collision_course: bool | None = None
     spl: float | None = None
+    itr: float | None = None
+    itr_states: int | None = None
+    itr_sd_m: float | None = None
     error: str | None = None
     fingerprint: str = ""
     solve_times_ms: tuple[float, ...] = field(default=(), repr=False)

@@ -69,6 +69,16 @@ def ttc_text(result: dict[str, Any]) -> str:
     return f"{na(result.get('min_ttc_s'))} ({fmt(result['collision_course_rate'])} on a course)"
 
 
+def itr_text(result: dict[str, Any]) -> str:
+    """CrowdNav++'s intrusion ratio in percent, as its rl/evaluation.py prints it ("n/a": not measured)."""
+    return "n/a" if result.get("itr") is None else f"{100.0 * result['itr']:.2f}%"
+
+
+def sd_text(result: dict[str, Any]) -> str:
+    """CrowdNav++'s social distance during intrusions, m ("n/a": not measured; "–": measured, no intrusion)."""
+    return "n/a" if result.get("itr") is None else fmt(result.get("itr_sd_m"))
+
+
 SOCIAL_ROWS = (
     ("time in intimate/personal/social zone, mean s (fraction)", zones_text),
     ("group collision rate [95% CI]",
@@ -77,6 +87,8 @@ SOCIAL_ROWS = (
     ("jerk (m/s^3)", lambda r: na(r.get("jerk_mps3"))),
     ("min time to collision, mean s (share on a collision course)", ttc_text),
     ("SPL", lambda r: na(r.get("spl"), 3)),
+    ("ITR, intrusion ratio (CrowdNav++)", itr_text),
+    ("SD, social distance in intrusions (m)", sd_text),
 )
 
 
@@ -142,6 +154,8 @@ COMPARE_COLUMNS = (
     ("jerk (m/s^3)", lambda r: na(r.get("jerk_mps3"))),
     ("min TTC (s)", ttc_text),
     ("SPL", lambda r: na(r.get("spl"), 3)),
+    ("ITR", itr_text),
+    ("SD (m)", sd_text),
 )
 
 

@@ -139,7 +139,10 @@ def social_summary(done: Sequence[EpisodeRecord]) -> dict[str, Any]:
     mean seconds and mean fraction of episode time per Hall zone; `group_collision_rate` with its Wilson interval
     over episodes with group labels (`group_collision_measured` of them); mean path irregularity (rad) and jerk
     (m/s^3); `collision_course_rate` (Wilson) and `min_ttc_s`, the mean of the per-episode minimum time to
-    collision over the episodes that were on a collision course; mean SPL (failures count 0)."""
+    collision over the episodes that were on a collision course; mean SPL (failures count 0); CrowdNav++'s `itr`,
+    the mean of the per-episode intrusion ratios (every outcome, each episode weighing the same, as its
+    rl/evaluation.py averages them), over `itr_measured` episodes, `itr_states` their intruding states, and
+    `itr_sd_m`, the social distance pooled over those states (each state weighing the same; None without any)."""
     def mean(key: str) -> float | None:
         return _mean([v for r in done if (v := getattr(r, key)) is not None])
 
@@ -154,6 +157,11 @@ def social_summary(done: Sequence[EpisodeRecord]) -> dict[str, Any]:
     _rate(out, "collision_course_rate", sum(bool(r.collision_course) for r in course), len(course))
     out["min_ttc_s"] = _mean([r.min_ttc_s for r in course if r.collision_course and r.min_ttc_s is not None])
     out["spl"] = mean("spl")
+    itr = [r for r in done if r.itr is not None]
+    states = [(r.itr_states, r.itr_sd_m) for r in itr if r.itr_states and r.itr_sd_m is not None]
+    out["itr_measured"], out["itr"] = len(itr), _mean([r.itr for r in itr])
+    out["itr_states"] = int(sum(n for n, _ in states))
+    out["itr_sd_m"] = sum(n * sd for n, sd in states) / out["itr_states"] if states else None
     return out
 
 
