@@ -260,8 +260,9 @@ def _benchmark(args: argparse.Namespace) -> int:
                           "command to resume") from None
     print(leaderboard_markdown(board))
     run = board["run"]
+    records = " and records.jsonl" if (args.out / RECORDS).is_file() else " (no records.jsonl: no episode ran here)"
     print(f"\n{run['episodes_run']} episodes run, {run['episodes_resumed']} already recorded, "
-          f"{run['wall_time_s']:.0f} s; wrote {args.out}/leaderboard.json, .md, .png and records.jsonl")
+          f"{run['wall_time_s']:.0f} s; wrote {args.out}/leaderboard.json, .md, .png{records}")
     if run["errors"]:
         print(f"crowdnav: {run['errors']} episodes ended in an error (causes in {args.out}/records.jsonl, tracebacks "
               f"in {args.out}/errors); rerun the same command to retry them", file=sys.stderr)
