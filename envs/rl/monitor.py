@@ -75,6 +75,7 @@ class TrainMonitor(BaseCallback):
         self.next_eval = cfg.eval_every_steps
         self.next_ckpt = cfg.checkpoint_every_steps
         self.best_success = -1.0
+        self.best_return = -float("inf")  # ties in success go to the higher mean return (e.g. the faster agent)
         self.extra: dict[str, Any] = {}
 
     # --------------------------------------------------------------------------------------- SB3 hooks
@@ -131,8 +132,9 @@ class TrainMonitor(BaseCallback):
         print(f"eval @ {row['steps']}: success {row['success']:.2f}  collision {row['collision']:.2f}  "
               f"timeout {row['timeout']:.2f}  return {row['mean_return']:.2f}  ({self.cfg.eval_episodes} episodes, "
               f"seeds {seeds.start}..{seeds.stop - 1})", flush=True)
-        if row["success"] > self.best_success and finite_parameters(model):
-            self.best_success = float(row["success"])
+        better = (row["success"], row["mean_return"]) > (self.best_success, self.best_return)
+        if better and np.isfinite(row["mean_return"]) and finite_parameters(model):
+            self.best_success, self.best_return = float(row["success"]), float(row["mean_return"])
             save_agent(model, self.out / "checkpoints" / "best.zip", self.env_config, self._meta(model))
         return row
 
@@ -152,8 +154,10 @@ class TrainMonitor(BaseCallback):
     def checkpoint(self) -> None:
         meta = self._meta(self.model)
         save_agent(self.model, self.out / "checkpoints" / "latest.zip", self.env_config, meta)
+        best_return = self.best_return if np.isfinite(self.best_return) else None
         write_json_atomic(self.out / "checkpoints" / "state.json",
-                          {**meta, "best_success": self.best_success, "next_eval": self.next_eval})
+                          {**meta, "best_success": self.best_success, "best_return": best_return,
+                           "next_eval": self.next_eval})
 
     def finish(self, model: Any) -> None:
         self.model = model
@@ -165,7 +169,8 @@ class TrainMonitor(BaseCallback):
         self.checkpoint()  # after the last evaluation, so that a resume does not repeat it
         save_agent(model, self.out / "final.zip", self.env_config, self._meta(model))
         print(f"done: {model.num_timesteps} steps in {_hms(self.wall_s)}; agent {self.out / 'final.zip'}, "
-              f"best {self.out / 'checkpoints' / 'best.zip'} (success {self.best_success:.2f})", flush=True)
+              f"best {self.out / 'checkpoints' / 'best.zip'} (success {self.best_success:.2f}, return "
+              f"{self.best_return:.2f})", flush=True)
 
 
 def load_checkpoint(model: Any, monitor: TrainMonitor, out: Path) -> None:
@@ -175,6 +180,8 @@ def load_checkpoint(model: Any, monitor: TrainMonitor, out: Path) -> None:
     model.num_timesteps = int(state["steps"])
     monitor.wall_before = float(state["wall_s"])
     monitor.best_success = float(state["best_success"])
+    best_return = state.get("best_return")  # absent in runs saved before it was kept; None before a finite one
+    monitor.best_return = -float("inf") if best_return is None else float(best_return)
     monitor.next_eval = int(state["next_eval"])
     monitor.extra = {k: v for k, v in state.items() if k == "warm_start"}
     monitor.next_ckpt = (model.num_timesteps // monitor.cfg.checkpoint_every_steps + 1) \
