@@ -41,9 +41,11 @@ POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "random": (),
     "orca": (),
     "ppo-crowdnav": ("--threads",),
+    "ppo-crowdnav-classic": ("--threads",),
 }
 SB3_FLAGS = ("--threads",)
-OBSERVATION_POLICIES = ("ppo-crowdnav",)  # registry policies acting on the observation (as sb3: and plug-ins do)
+# registry policies acting on the observation (as sb3: and plug-ins do)
+OBSERVATION_POLICIES = ("ppo-crowdnav", "ppo-crowdnav-classic")
 
 
 def flags_read(name: str) -> tuple[str, ...]:
@@ -86,7 +88,7 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
                    help="env steps between re-plans (mpc-gpgraph, mpc-oracle, mpc-cv, mpc-none, plug-ins; default 1, "
                    "or the benchmark suite's planner default)")
     p.add_argument("--threads", type=int, default=DefaultInt(PolicyConfig.threads),
-                   help="torch threads per process (mpc-gpgraph, ppo-crowdnav, sb3: agents, plug-ins)")
+                   help="torch threads per process (mpc-gpgraph, ppo-crowdnav agents, sb3: agents, plug-ins)")
     p.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE",
                    help="override an MPCConfig field of the MPC policies (repeatable), e.g. safety_margin_m=0.4; on "
                    "top of the benchmark suite's planner defaults, if it has any (crowdnav suites lists them)")

@@ -23,7 +23,10 @@ def read_run(path: Path) -> tuple[str, dict[str, list[float]]]:
     inputs = ("groups" if cfg["groups"] else "no groups") + (", predictions" if cfg["predictions"] else "")
     label = (f"{path.name}: warm start {cfg['warm_start']}, lr {cfg['learning_rate']:g}, "
              f"target_kl {cfg.get('target_kl')}, {inputs}")
-    return label, {k: [float(r[k]) for r in rows] for k in ("steps", "wall_s", "success", "collision")}
+    data = {k: [float(r[k]) for r in rows] for k in ("steps", "wall_s", "success", "collision")}
+    every = int(cfg.get("decision_every_steps", 1))  # eval.csv counts decisions; the plot counts env steps
+    data["steps"] = [s * every for s in data["steps"]]
+    return label + (f", a decision every {every} env steps" if every > 1 else ""), data
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,6 +16,9 @@ Registry names:
                   baseline; needs the optional package pyrvo)
     ppo-crowdnav  the shipped PPO agent (`envs/policies/agents/ppo-crowdnav.zip`, trained with `envs.rl.train`: circle
                   crossing, 5 pedestrians who do not see the robot; RESULTS.md "RL baseline")
+    ppo-crowdnav-classic  the shipped PPO agent for CrowdNav's classic setting (suite crowdnav-classic: 5 ORCA humans
+                  who do not see the robot, holonomic robot; acts every 0.25 s; RESULTS.md "RL agents for CrowdNav's
+                  settings"); other envs refuse it (robot model)
 
 Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.policies.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
@@ -327,6 +330,7 @@ POLICIES: dict[str, Factory] = {
     "random": lambda cfg, mpc, env: RandomPolicy(),
     "orca": lambda cfg, mpc, env: _orca_policy(env),
     "ppo-crowdnav": _agent("ppo-crowdnav"),
+    "ppo-crowdnav-classic": _agent("ppo-crowdnav-classic"),
 }
 
 

@@ -146,6 +146,7 @@ class TrainMonitor(BaseCallback):
     def note_warm_start(self, info: dict[str, Any]) -> None:
         self.extra["warm_start"] = info
         self.wall_before += info["warm_start_s"]
+        self.t0 = time.perf_counter()  # the warm start's time is in wall_before now (it was counted twice at step 0)
 
     def _meta(self, model: Any) -> dict[str, Any]:
         return {"steps": int(model.num_timesteps), "wall_s": round(self.wall_s, 1), "train_config": self.cfg.to_json(),

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from dataclasses import replace
@@ -225,6 +226,8 @@ def test_an_agent_trained_in_a_suite_cell_keeps_its_decision_period_in_the_bench
     out = tmp_path / "run"
     cfg = replace(CLASSIC, warm_start="dagger")
     assert train(cfg, out) == 0
+    walls = [float(r["wall_s"]) for r in csv.DictReader((out / "eval.csv").open())]
+    assert walls == sorted(walls)  # the warm start's time counted once (it was twice in the step-0 row)
     _, layout = read_agent(out / "final.zip")
     assert layout["meta"]["decision_every_steps"] == 5 and layout["meta"]["train_config"]["suite"] == "crowdnav-classic"
     assert TrainConfig.from_json(json.loads((out / "config.json").read_text())) == cfg
@@ -250,3 +253,18 @@ def test_the_demonstrating_mpc_runs_the_suites_planner_settings():
     assert expert_mpc(TrainConfig()) is None  # no suite: the env's MPC
     mpc = expert_mpc(TrainConfig(suite="crowdnav-classic"))
     assert mpc == replace(ENV_MPC, clearance_growth_mps=0.0) and ENV_MPC.clearance_growth_mps > 0
+
+
+def test_the_packaged_classic_agent_crosses_crowdnavs_circle_and_only_there():
+    """`ppo-crowdnav-classic` loads by name in crowdnav-classic's env, acts every 5 env steps (0.25 s) and reaches the
+    goal without contact in unseen episodes (seeds 400000+: no suite, training, selection or demonstration seed;
+    RESULTS reports the suite's 500). The unicycle env refuses it, naming the robot model."""
+    from envs.evaluation.evaluate import evaluate
+    from envs.policies import PolicyConfig, make_policy
+
+    cfg = load_suite("crowdnav-classic").cells[0].env_config(0)
+    res = evaluate(PolicyConfig("ppo-crowdnav-classic"), cfg, episodes=12, seed=400_000, record=0, progress=False)
+    assert res["success_rate"] >= 11 / 12 and res["collision_rate"] <= 1 / 12
+    assert make_policy("ppo-crowdnav-classic", CrowdNavEnv(cfg)).decision_every_steps == 5
+    with pytest.raises(ValueError, match="robot_model 'holonomic' \\(agent\\) vs 'unicycle' \\(env\\)"):
+        make_policy("ppo-crowdnav-classic", CrowdNavEnv(CrowdNavConfig()))
