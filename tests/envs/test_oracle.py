@@ -12,6 +12,7 @@ from envs import CrowdNavConfig, CrowdNavEnv
 from envs.crowd import rows_of
 from envs.policies import POLICIES, act, make_policy
 from envs.replay import ReplayConfig
+from planner import RobotConfig
 
 ACTION = np.array([0.4, 0.1], np.float32)
 
@@ -53,8 +54,19 @@ def _recording(tmp_path, name: str, step_into_the_route_after_s: float | None) -
     return ReplayConfig(path=path, start_mode="fixed")
 
 
+def _robot_for(name: str) -> RobotConfig:
+    """The robot a registry policy runs: a packaged agent's robot model (its file records it), else the default."""
+    from envs.policies.registry import AGENTS_DIR
+    from envs.policies.sb3_files import read_agent
+
+    path = AGENTS_DIR / f"{name}.zip"
+    model = read_agent(path)[1]["signature"]["robot_model"] if path.is_file() else RobotConfig().model
+    return replace(RobotConfig(), model=model)
+
+
 def _actions(replay: ReplayConfig, name: str, steps: int) -> np.ndarray:
-    env = CrowdNavEnv(CrowdNavConfig(scenario="replay", replay=replay, warmup_s=0.0, time_limit_s=20.0))
+    env = CrowdNavEnv(CrowdNavConfig(scenario="replay", replay=replay, warmup_s=0.0, time_limit_s=20.0,
+                                     robot=_robot_for(name)))
     policy = make_policy(name, env)
     env.reset(seed=0)
     policy.reset(0)
@@ -87,7 +99,8 @@ def test_only_the_oracle_sees_the_recording_ahead(tmp_path):
 def test_the_view_holds_the_future_only_for_a_policy_that_reads_it():
     env = CrowdNavEnv(CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, robot_visible=False))
     env.reset(seed=0)
-    readers = [n for n in POLICIES if getattr(make_policy(n, env), "reads_future", False)]
+    envs = {n: CrowdNavEnv(replace(env.config, robot=_robot_for(n))) for n in POLICIES}
+    readers = [n for n in POLICIES if getattr(make_policy(n, envs[n]), "reads_future", False)]
     assert readers == ["mpc-oracle", "mpc-oracle-paths"]
     assert env.view().future is None
     oracle = make_policy("mpc-oracle", env)
