@@ -1,0 +1,76 @@
+"""Per-decision latency of the policies in CrowdNav's classic setting: the PPO agent against the MPC, side by side.
+
+Every policy runs the same episodes of `crowdnav-classic`'s cell (seeds 400000+, which no suite reports) and decides
+every 5 env steps (0.25 s), as the suite runs them: `ppo-crowdnav-classic` (its recorded decision period),
+`mpc-cv` and `mpc-gpgraph` (re-planning every 5 steps with the suite's planner defaults). Measured: the wall time
+of `envs.policies.act` at the decision steps (the policy's view of the env, its predictor, its solve or forward
+pass, and the action), one torch thread, one process. The table gives p50 / p95 / max in ms and the ratio of each
+p50 and p95 to mpc-gpgraph's.
+
+    python bench/bench_policy_latency.py              # 10 episodes per policy, about a minute
+    python bench/bench_policy_latency.py --quick      # 2 episodes per policy
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from envs.env import CrowdNavEnv
+from envs.evaluation.suite import load_suite
+from envs.policies import ENV_MPC, PolicyConfig, act, make_policy
+from predictor import set_threads
+
+SUITE = "crowdnav-classic"
+SEED0 = 400_000
+POLICIES = ("ppo-crowdnav-classic", "mpc-cv", "mpc-gpgraph")
+
+
+def decision_times(name: str, episodes: int) -> np.ndarray:
+    """Wall times (s) of `act` at the decision steps of `episodes` episodes of the suite's cell."""
+    suite = load_suite(SUITE)
+    env = CrowdNavEnv(suite.cells[0].env_config(SEED0))
+    every = suite.replan_every_steps or 1
+    config = PolicyConfig(name) if name.startswith("ppo") else \
+        PolicyConfig(name, mpc=replace(ENV_MPC, **dict(suite.mpc)), replan_every_steps=every)
+    policy = make_policy(config, env)
+    times = []
+    for seed in range(SEED0, SEED0 + episodes):
+        env.reset(seed=seed)
+        policy.reset(seed)
+        step, done = 0, False
+        while not done:
+            start = time.perf_counter()
+            action = act(policy, env)
+            if step % every == 0:
+                times.append(time.perf_counter() - start)
+            done = any(env.step(action)[2:4])
+            step += 1
+    return np.array(times)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="2 episodes per policy")
+    args = ap.parse_args(argv)
+    set_threads(1)
+    episodes = 2 if args.quick else 10
+    rows = {name: decision_times(name, episodes) * 1e3 for name in POLICIES}
+    ref = rows["mpc-gpgraph"]
+    print(f"{SUITE}, {episodes} episodes per policy (seeds {SEED0}+), one thread; {platform.processor() or 'cpu'}, "
+          f"Python {platform.python_version()}")
+    print("| policy | decisions | p50 (ms) | p95 (ms) | max (ms) | p50 / mpc-gpgraph | p95 / mpc-gpgraph |")
+    print("|---|---|---|---|---|---|---|")
+    for name, t in rows.items():
+        p50, p95 = np.percentile(t, 50), np.percentile(t, 95)
+        print(f"| {name} | {len(t)} | {p50:.2f} | {p95:.2f} | {t.max():.2f} | {p50 / np.percentile(ref, 50):.3f} | "
+              f"{p95 / np.percentile(ref, 95):.3f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
