@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import platform
 import time
-from dataclasses import replace
 
 import numpy as np
 
@@ -36,7 +35,7 @@ def decision_times(name: str, episodes: int) -> np.ndarray:
     env = CrowdNavEnv(suite.cells[0].env_config(SEED0))
     every = suite.replan_every_steps or 1
     config = PolicyConfig(name) if name.startswith("ppo") else \
-        PolicyConfig(name, mpc=replace(ENV_MPC, **dict(suite.mpc)), replan_every_steps=every)
+        PolicyConfig(name, mpc=suite.mpc_config(ENV_MPC), replan_every_steps=every)
     policy = make_policy(config, env)
     times = []
     for seed in range(SEED0, SEED0 + episodes):

@@ -159,9 +159,9 @@ def policy_configs(args: argparse.Namespace, suite: Suite | None = None) -> list
     for flag in chosen:
         if not any(flag in flags_read(n) for n in args.policy):
             raise ignored_flag(flag, args.policy, _readers(flag))
-    suite_mpc = dict(suite.mpc) if suite is not None else {}
-    if "--mpc" in chosen or suite_mpc:
-        chosen["--mpc"] = replace(ENV_MPC, **{**suite_mpc, **_mpc_overrides(args.mpc or [])})
+    if "--mpc" in chosen or (suite is not None and suite.mpc):
+        base = suite.mpc_config(ENV_MPC) if suite is not None else ENV_MPC
+        chosen["--mpc"] = replace(base, **_mpc_overrides(args.mpc or []))
     if suite is not None and suite.replan_every_steps is not None and "--replan-every" not in chosen:
         chosen["--replan-every"] = suite.replan_every_steps
     return [PolicyConfig(name=n, **{FLAG_FIELDS[f]: v for f, v in chosen.items() if f in flags_read(n)})

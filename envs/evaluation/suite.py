@@ -116,6 +116,10 @@ class Suite:
     replan_every_steps: int | None = None  # planner policies' default here (None: the registry's)
     mpc: tuple[tuple[str, Any], ...] = ()  # MPCConfig overrides for the planner policies here, (field, value)
 
+    def mpc_config(self, base: MPCConfig) -> MPCConfig:
+        """`base` (the env's MPC) with this suite's planner overrides: what its MPC policies run."""
+        return replace(base, **dict(self.mpc))
+
     def cell(self, name: str) -> Cell:
         for c in self.cells:
             if c.name == name:

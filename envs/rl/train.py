@@ -34,7 +34,6 @@ import os
 import sys
 import time
 import tomllib
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -86,7 +85,7 @@ def expert_mpc(cfg: TrainConfig) -> Any:
     from envs.evaluation.suite import load_suite
     from envs.policies import ENV_MPC
 
-    return replace(ENV_MPC, **dict(load_suite(cfg.suite).mpc))
+    return load_suite(cfg.suite).mpc_config(ENV_MPC)
 
 
 def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None) -> dict[str, Any]:
