@@ -18,7 +18,7 @@ from envs.config import DEFAULT_PREDICTOR
 from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
-from planner import RouteConfig
+from planner import LaneConfig, RouteConfig
 
 if TYPE_CHECKING:
     from envs.evaluation.suite import Suite
@@ -104,7 +104,7 @@ def add_backend_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _mpc_overrides(items: list[str]) -> dict[str, Any]:
+def mpc_overrides(items: list[str]) -> dict[str, Any]:
     valid = {f.name: f for f in fields(ENV_MPC) if f.name not in ("robot", "weights")}
     out: dict[str, Any] = {}
     for item in items:
@@ -115,15 +115,19 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
+NESTED = {"route": RouteConfig, "lane": LaneConfig}  # --mpc FIELD=default gives these configs
+
+
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
     """The value of one --mpc FIELD=VALUE: a scalar of the field's type, `none` for an optional field, and for
-    `route` one of none (no global route) or default (`planner.RouteConfig()`)."""
+    `route` and `lane` one of none (no global route, no lane layer) or default (`planner.RouteConfig()`,
+    `planner.LaneConfig()`)."""
     if optional and text.lower() == "none":
         return None
-    if key == "route":
+    if key in NESTED:
         if text.lower() != "default":
-            raise ValueError(f"--mpc {item!r}: route is one of none, default")
-        return RouteConfig()
+            raise ValueError(f"--mpc {item!r}: {key} is one of none, default")
+        return NESTED[key]()
     current = getattr(ENV_MPC, key)
     kind = float if current is None else type(current)
     try:
@@ -161,7 +165,7 @@ def policy_configs(args: argparse.Namespace, suite: Suite | None = None) -> list
             raise ignored_flag(flag, args.policy, _readers(flag))
     if "--mpc" in chosen or (suite is not None and suite.mpc):
         base = suite.mpc_config(ENV_MPC) if suite is not None else ENV_MPC
-        chosen["--mpc"] = replace(base, **_mpc_overrides(args.mpc or []))
+        chosen["--mpc"] = replace(base, **mpc_overrides(args.mpc or []))
     if suite is not None and suite.replan_every_steps is not None and "--replan-every" not in chosen:
         chosen["--replan-every"] = suite.replan_every_steps
     return [PolicyConfig(name=n, **{FLAG_FIELDS[f]: v for f, v in chosen.items() if f in flags_read(n)})

@@ -21,7 +21,16 @@ from planner.baselines import (
     SocialForcePlanner,
     make_planner,
 )
-from planner.config import CROWD_MPC, ROBOT_MODELS, SOLVERS, CostWeights, MPCConfig, RobotConfig, RouteConfig
+from planner.config import (
+    CROWD_MPC,
+    ROBOT_MODELS,
+    SOLVERS,
+    CostWeights,
+    LaneConfig,
+    MPCConfig,
+    RobotConfig,
+    RouteConfig,
+)
 from planner.dynamics import brake_control, clip_control, model_dims, robot_dynamics, rollout, step_robot
 from planner.mpc import MPCPlanner
 from planner.prediction import (
@@ -43,6 +52,7 @@ __all__ = [
     "ConstantVelocityMPC",
     "CostWeights",
     "FrozenMPC",
+    "LaneConfig",
     "MPCConfig",
     "MPCPlanner",
     "PedPrediction",

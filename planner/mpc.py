@@ -10,6 +10,7 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.dynamics import brake_control, clip_control, model_dims, step_numpy
+from planner.lanes import LaneKeeper
 from planner.ocp import OCP, build_ocp, pack_params
 from planner.prediction import PedPrediction, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
@@ -76,6 +77,8 @@ class MPCPlanner:
         self._plan: _Plan | None = None
         self._shielded: np.ndarray | None = None  # the command the shield applied last step, if it replaced one
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
+        lane = self.config.lane
+        self.lanes = LaneKeeper(lane, self.config.wall_clearance_m) if lane is not None else None
 
     def reset(self) -> None:
         """Forget the stored plan (warm start and fallback), the shield's last command and the route; keep the
@@ -84,6 +87,8 @@ class MPCPlanner:
         self._shielded = None
         if self.router is not None:
             self.router.reset()
+        if self.lanes is not None:
+            self.lanes.reset()
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
              obstacles: np.ndarray | list | None = None) -> PlanResult:
@@ -98,7 +103,7 @@ class MPCPlanner:
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
         routed = time.perf_counter()
         try:
-            subgoal = self._subgoal(state, goal, obstacles)
+            subgoal = self._subgoal(state, goal, prediction, obstacles)
             routed = time.perf_counter() - routed
             result = self._solve(state, subgoal, prediction, obstacles)
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
@@ -109,12 +114,16 @@ class MPCPlanner:
         self.stats.record(result)
         return result
 
-    def _subgoal(self, state: np.ndarray, goal: np.ndarray, obstacles: np.ndarray | None) -> np.ndarray:
-        """The point the solve heads for: the goal, or with a route (``config.route``) and walls, the route's
-        subgoal (planner/route.py)."""
-        if self.router is None or obstacles is None or len(obstacles) == 0:
-            return goal
-        return self.router.subgoal(state[:2], goal, obstacles)
+    def _subgoal(self, state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
+                 obstacles: np.ndarray | None) -> np.ndarray:
+        """The point the solve heads for: the goal; with a route (``config.route``) and walls, the route's subgoal
+        (planner/route.py); with a lane layer (``config.lane``) and the goal in sight, the lane's (planner/lanes.py)."""
+        subgoal = goal
+        if self.router is not None and obstacles is not None and len(obstacles):
+            subgoal = self.router.subgoal(state[:2], goal, obstacles)
+        if self.lanes is not None and np.array_equal(subgoal, goal):
+            subgoal = self.lanes.subgoal(state[:2], goal, prediction, obstacles)
+        return subgoal
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:
         """``result`` with its first control checked by the safety shield (planner/shield.py); the shield's
