@@ -9,7 +9,12 @@ samples it did not keep, a pedestrian can still reach the robot. The shield clos
    step) with the acceleration bounds applied, giving robot positions ``(C, T, 2)``.
 3. Every predicted sample ``(K, T, N, 2)``, resampled from the prediction's step to ``shield_dt_s``, is one
    possible future. A candidate *hits* a sample when its clearance (centre distance - robot radius -
-   pedestrian radius) drops below ``shield_margin_m`` at some time, or it comes that close to a wall.
+   pedestrian radius) drops below ``shield_margin_m`` at some time, or it comes that close to a wall. While no
+   pedestrian is within reach over the look-ahead, walls are held to the MPC's own ``wall_margin_m`` instead: a wall
+   is known exactly, and with the pedestrians' margin the shield vetoed every plan through a door that the MPC fits
+   with its 0.05 m wall margin, so the robot stood at the jamb (crowdnav-tune, mpc-gpgraph: 84 -> 96 successes of
+   140, collisions 23 -> 24). With someone within reach the wider margin stays: relaxing it there too let the robot
+   press along the walls of dense corridors and collide more (23 -> 34; docs/decisions/planner-settings.md).
    Its risk is the fraction of samples it hits.
 4. When the MPC's control has risk <= ``shield_max_risk``, it is kept. Otherwise the shield takes the candidate
    with the least time-discounted violation ``mean_k sum_t exp(-t / shield_tau_s) * relu(margin - clearance)``
@@ -117,8 +122,9 @@ def within_reach(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, c
 
 
 def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, robot_radius: float,
-               walls: np.ndarray | None) -> np.ndarray:
-    """Smallest clearance (m) to any pedestrian or wall: robot (C, T, 2), futures (K, T, n, 2) -> (C, K, T)."""
+               walls: np.ndarray | None, wall_slack_m: float = 0.0) -> np.ndarray:
+    """Smallest clearance (m) to any pedestrian or wall: robot (C, T, 2), futures (K, T, n, 2) -> (C, K, T). A wall's
+    clearance counts `wall_slack_m` more (the shield's margin minus the MPC's wall margin: a wall is where it is)."""
     c, t = robot_xy.shape[:2]
     if futures.shape[2]:
         dx = robot_xy[:, None, :, None, 0] - futures[None, ..., 0]  # (C, K, T, n)
@@ -126,7 +132,7 @@ def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, rob
         ped = (np.sqrt(dx * dx + dy * dy) - radii).min(-1) - robot_radius
     else:
         ped = np.full((c, max(futures.shape[0], 1), t), np.inf)
-    wall = wall_clearance(robot_xy, walls) - robot_radius
+    wall = wall_clearance(robot_xy, walls) - robot_radius + wall_slack_m
     return np.minimum(ped, wall[:, None, :])
 
 
@@ -150,7 +156,9 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     robot_xy = rollout_candidates(state, commands, cfg.shield_dt_s, cfg.robot)
     futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, n_steps, cfg.shield_cv)
     near = within_reach(np.asarray(state, float)[:2], futures, radii, cfg)
-    clear = clearances(robot_xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls)  # (C, K [+1], T)
+    # walls: the MPC's wall margin while nobody is within reach, else the pedestrians' (see the module docstring)
+    wall_slack = 0.0 if near.any() else cfg.shield_margin_m - (cfg.wall_clearance_m - cfg.robot.radius_m)
+    clear = clearances(robot_xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls, wall_slack)  # (C, K, T)
     short = cfg.shield_margin_m - clear
     hit = (short > 0).any(-1)  # (C, K [+1])
     risk = hit[:, : len(futures) - has_cv].mean(-1)
