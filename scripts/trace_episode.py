@@ -14,16 +14,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from envs import CrowdNavEnv
-from envs.cli_options import mpc_overrides
+from envs.cli import build_parser
+from envs.cli_options import policy_configs
 from envs.evaluation.suite import load_suite
-from envs.policies import PolicyConfig, decide, make_policy
-from envs.policies.registry import ENV_MPC, REPLAN_EVERY_STEPS
+from envs.policies import decide, make_policy
 
 
 def _line(t: float, robot: np.ndarray, result: Any, peds: Any) -> str:
@@ -41,15 +41,18 @@ def _line(t: float, robot: np.ndarray, result: Any, peds: Any) -> str:
 
 
 def trace(suite: str, cell_name: str, seed: int, policy: str, t_from: float, t_to: float,
-          mpc: dict[str, Any] | None = None) -> str:
-    """Run the episode, print the re-plans between t_from and t_to (s); returns the outcome line. `mpc`: MPCConfig
-    fields over the suite's planner settings."""
+          mpc: Sequence[str] = ()) -> str:
+    """Run the episode, print the re-plans between t_from and t_to (s); returns the outcome line. The policy is
+    configured as `crowdnav benchmark` configures it in that cell: the suite's planner settings, `mpc` (FIELD=VALUE
+    items, as its --mpc) over them, and the cell's predictor."""
     loaded = load_suite(suite)
     cell = loaded.cell(cell_name)
+    args = build_parser().parse_args(["evaluate", "--policy", policy,
+                                      *(arg for item in mpc for arg in ("--mpc", item))])
+    (pcfg,) = policy_configs(args, loaded)
     cfg = cell.env_config(seed)
     env = CrowdNavEnv(cfg)
-    pol = make_policy(PolicyConfig(policy, mpc=replace(loaded.mpc_config(ENV_MPC), **(mpc or {})),
-                                   replan_every_steps=loaded.replan_every_steps or REPLAN_EVERY_STEPS), env)
+    pol = make_policy(pcfg.for_cell(cell.scene, cell.predictor), env)
     planner = getattr(pol, "planner", None)
     if planner is None or not hasattr(planner, "plan"):
         raise ValueError(f"{policy} has no planner to trace; MPC policies only (mpc-gpgraph, mpc-oracle, mpc-cv, ...)")
@@ -82,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("seed", type=int)
     ap.add_argument("--policy", default="mpc-gpgraph")
     ap.add_argument("--from", dest="t_from", type=float, default=0.0, help="first time to print, s")
-    ap.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE", help="as in crowdnav benchmark")
     ap.add_argument("--to", dest="t_to", type=float, default=float("inf"), help="last time to print, s")
+    ap.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE", help="as in crowdnav benchmark")
     args = ap.parse_args(argv)
     try:
         cell = load_suite(args.suite).cell(args.cell)
@@ -91,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"seed {args.seed} is not one of {args.cell}'s seeds ({cell.seeds[0]}..{cell.seeds[-1]})")
         if not args.t_from <= args.t_to:
             raise ValueError("--from must not be after --to")
-        print(trace(args.suite, args.cell, args.seed, args.policy, args.t_from, args.t_to, mpc_overrides(args.mpc)))
+        print(trace(args.suite, args.cell, args.seed, args.policy, args.t_from, args.t_to, args.mpc))
     except ValueError as exc:
         print(f"trace_episode: {exc}", file=sys.stderr)
         return 2
