@@ -66,10 +66,10 @@ class LaneKeeper:
         position, goal = np.asarray(position, float), np.asarray(goal, float)
         walls = np.zeros((0, 4)) if walls is None else np.asarray(walls, float).reshape(-1, 4)
         dist = float(np.linalg.norm(goal - position))
-        pos, vel = walker_states(prediction)
         if dist < max(cfg.min_goal_distance_m, 1e-6):
             self.offset_m = 0.0
             return goal
+        pos, vel = walker_states(prediction)
         d = (goal - position) / dist
         n = np.array([-d[1], d[0]])
         rel = pos - position
