@@ -2,6 +2,7 @@
 
     crowdnav evaluate --policy mpc-gpgraph mpc-cv --scenario plaza --episodes 50 --seed 0 --out out/eval
     crowdnav benchmark --suite crowdnav-v1 --policy mpc-gpgraph mpc-cv mpc-none social-force --out out/bench
+    crowdnav bounds --suite crowdnav-v1 --out out/bench   (what any robot could do, read by the leaderboard)
     crowdnav demo [--out out/demo]
     crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --warm-start bc --out out/train/cc5
     crowdnav policies | scenarios | suites
@@ -101,6 +102,21 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--merge", type=Path, nargs="+", action="extend", default=[], metavar="RECORDS",
                    help="records.jsonl files from other runs or machines to merge into the leaderboard")
     add_backend_options(b)
+
+    r = sub.add_parser("bounds", help="what any robot could do: reachable-set bounds on every episode whose crowd "
+                       "ignores the robot (envs.evaluation.reachability); the benchmark's leaderboard in the same "
+                       "--out folder classes each failure by them", formatter_class=FMT)
+    r.add_argument("--suite", required=True, help="suite name (crowdnav suites lists them)")
+    r.add_argument("--cells", default=None, metavar="A,B", help="comma-separated cells of the suite (default all)")
+    r.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="bounds.jsonl and bounds.md; rerun with the same DIR to resume")
+    r.add_argument("--data", type=Path, default=DEFAULT_DATA, metavar="DIR", help="ETH/UCY folder for the real cells")
+    r.add_argument("--cells-per-step", type=int, default=5, metavar="N",
+                   help="grid cells per robot step at full speed (finer: tighter bounds, slower)")
+    r.add_argument("--optimistic-dt", type=float, default=0.2, metavar="S",
+                   help="how often the optimistic set is checked against the people, s (a multiple of the env step)")
+    r.add_argument("--workers", type=int, default=default_workers())
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     d = sub.add_parser("demo", help="a grouped crowd, GP-Graph prediction and the MPC robot, end to end",
                        formatter_class=FMT)
@@ -270,6 +286,25 @@ def _benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bounds(args: argparse.Namespace) -> int:
+    from envs.evaluation.bounds import BOUNDS, bounds_table, run_bounds
+    from envs.evaluation.reachability import ReachConfig
+    from envs.evaluation.suite import load_suite
+
+    if args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    config = ReachConfig(cells_per_step=args.cells_per_step, optimistic_dt_s=args.optimistic_dt)
+    suite = load_suite(args.suite)
+    cells = suite.select(args.cells.split(",") if args.cells else None)
+    summary = run_bounds(suite, cells, args.out, config=config, data=args.data, workers=args.workers,
+                         progress=not args.no_progress)
+    print("\n".join(bounds_table(summary)))
+    run = summary["run"]
+    print(f"\n{run['episodes_run']} episodes computed, {run['episodes_resumed']} already there, "
+          f"{run['wall_time_s']:.0f} s; wrote {args.out}/{BOUNDS} and bounds.md")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     import os
 
@@ -324,7 +359,8 @@ def _train(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    run = {"evaluate": _evaluate, "benchmark": _benchmark, "demo": _demo, "train": _train}.get(args.command)
+    run = {"evaluate": _evaluate, "benchmark": _benchmark, "bounds": _bounds, "demo": _demo,
+           "train": _train}.get(args.command)
     try:
         return run(args) if run is not None else _list(args.command)
     except (UsageError, ValueError, OSError) as exc:

@@ -3,7 +3,8 @@
 Records go to `<out>/records.jsonl` as episodes finish (`envs.evaluation.records.RecordStore`); a rerun with the same
 `--out` skips the episodes already recorded (a killed run resumes), and `merge` adds record files made
 elsewhere (another machine, a Ray cluster). The leaderboard and the paired comparisons are rebuilt from all
-records at the end (`envs.evaluation.leaderboard`).
+records at the end (`envs.evaluation.leaderboard`), with the any-robot bounds of `<out>/bounds.jsonl` when `crowdnav
+bounds` has written them there.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from envs.atomic import check_writable_dir
+from envs.evaluation.bounds import BOUNDS, current_bounds, read_bounds
 from envs.evaluation.episode import EpisodeTask, fingerprint
 from envs.evaluation.evaluate import CtrlC, Interrupted, check_setup
 from envs.evaluation.pool import run_tasks
@@ -91,6 +93,7 @@ def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Policy
     suite.check_data(list(cells), data)
     store = RecordStore(out / RECORDS)
     recorded = merge_records([store.read(), *(read_records(p) for p in merge)])  # bad files fail here
+    bounds = current_bounds(suite, cells, read_bounds(out / BOUNDS), out / BOUNDS)  # `crowdnav bounds`, if run
     plan = plan_benchmark(suite, cells, policies, out, data, recorded)
     for pcfg, task in {t.policy: t for t in plan.todo}.items():  # a bad plug-in fails here, not per episode
         check_setup(pcfg, task.env)
@@ -112,7 +115,7 @@ def run_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Policy
                           "rerun the same command to resume") from None
     wall = time.perf_counter() - start
     records = [r for r in merge_records([recorded, store.read()]) if r.key in wanted]
-    board = leaderboard(suite, list(cells), list(policies), records)
+    board = leaderboard(suite, list(cells), list(policies), records, bounds)
     board["run"] = {"episodes_run": len(plan.todo), "episodes_resumed": len(plan.done), "workers": workers,
                     "backend": backend, "wall_time_s": wall, "merged_files": [str(p) for p in merge],
                     "errors": sum(r.outcome == "error" for r in records)}

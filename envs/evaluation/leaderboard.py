@@ -14,8 +14,15 @@ from typing import Any
 import numpy as np
 
 from envs.atomic import write_json_atomic, write_text_atomic
+from envs.evaluation.bounds import bounds_summary, bounds_table
 from envs.evaluation.records import EpisodeRecord
-from envs.evaluation.reference import REFERENCE_POLICY, against_reference, reference_table
+from envs.evaluation.reference import (
+    REFERENCE_POLICY,
+    against_reference,
+    bound_classes,
+    bound_failure_table,
+    reference_table,
+)
 from envs.evaluation.report import SOCIAL_ROWS, fmt, intrusion_text, na, pyplot, rate_errors, rate_text, save_figure
 from envs.evaluation.stats import aggregate, paired_comparison
 from envs.evaluation.suite import Cell, Suite
@@ -28,10 +35,12 @@ def _pool(cells: list[Cell], pool: str) -> set[str]:
     return {c.name for c in cells if pool == "all" or c.is_real == (pool == "real")}
 
 
-def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig],
-                records: list[EpisodeRecord]) -> dict[str, Any]:
+def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig], records: list[EpisodeRecord],
+                bounds: dict[tuple[str, int], dict[str, Any]] | None = None) -> dict[str, Any]:
     """JSON-ready: per cell and pool, each policy's `stats.aggregate` (without per-episode data), and the
-    paired comparisons of every policy pair per pool (pairs matched by cell and seed)."""
+    paired comparisons of every policy pair per pool (pairs matched by cell and seed). With `bounds` (the
+    any-robot verdicts by (cell, seed), `envs.evaluation.bounds`): their summary and each policy's failures by
+    verdict, per pool."""
     by: dict[tuple[str, str], list[EpisodeRecord]] = {}
     for r in records:
         by.setdefault((r.cell, r.policy), []).append(r)
@@ -59,6 +68,11 @@ def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig],
                                  if pooled[a] and pooled[b]]
     if REFERENCE_POLICY in names:
         board["reference"] = _reference(cells, names, by)
+    if bounds:
+        failures = {pool: {n: bound_classes([r for c in members for r in by.get((c, n), [])], bounds)
+                           for n in names}
+                    for pool in POOLS if (members := _pool(cells, pool))}
+        board["bounds"] = {"summary": bounds_summary(suite, cells, bounds), "failures": failures}
     return board
 
 
@@ -174,8 +188,12 @@ def leaderboard_markdown(board: dict[str, Any]) -> str:
     body = (_summary(board) + _matrix(board, "collision_rate", "Collision rate [95% Wilson CI]")
             + _matrix(board, "avoidable_collision_rate", "Avoidable collision rate (robot or pedestrian at fault)")
             + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + _social(board) + reference_table(board)
-            + _paired(board))
+            + _bounds(board) + _paired(board))
     return "\n".join(head + body)
+
+
+def _bounds(board: dict[str, Any]) -> list[str]:
+    return [*bounds_table(board["bounds"]["summary"]), "", *bound_failure_table(board)] if "bounds" in board else []
 
 
 def leaderboard_png(board: dict[str, Any], path: str | Path) -> None:

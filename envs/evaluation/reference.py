@@ -54,3 +54,38 @@ def reference_table(board: dict[str, Any]) -> list[str]:
             lines.append(f"| {where} | {name} | {c['pairs']} | {c['failures']} | {c['reference_also_fails']} / "
                          f"{c['reference_succeeds']} | {head}{ci if head != '–' else ''} |")
     return [*lines, ""]
+
+
+def bound_classes(records: Sequence[EpisodeRecord], bounds: dict[tuple[str, int], dict[str, Any]]) -> dict[str, Any]:
+    """A policy's failures by the episode's any-robot verdict (`envs.evaluation.bounds`): on episodes no robot
+    could succeed in ("infeasible"), undecided ("open"), or where a holonomic robot had a contact-free path
+    ("feasible"); `unbounded`: failures on episodes without a bound (people there see the robot).
+    `successes_on_infeasible` must be 0: a success there would contradict the bound."""
+    out = {"failures": 0, "infeasible": 0, "open": 0, "feasible": 0, "unbounded": 0, "successes_on_infeasible": 0}
+    for r in records:
+        b = bounds.get((r.cell, r.seed))
+        if r.outcome == "success" and b is not None and b["verdict"] == "infeasible":
+            out["successes_on_infeasible"] += 1
+        if r.outcome in FAILURES:
+            out["failures"] += 1
+            out["unbounded" if b is None else b["verdict"]] += 1
+    return out
+
+
+def bound_failure_table(board: dict[str, Any]) -> list[str]:
+    """Markdown: each policy's failures per pool split by the any-robot verdict."""
+    b = board.get("bounds")
+    if not b:
+        return []
+    lines = ["### Failures against what any robot could do", "",
+             "A policy's failures (collision or time-out) on episodes no robot could succeed in / undecided / "
+             "where a holonomic robot had a contact-free path / not bounded (people see the robot).", "",
+             "| pool | policy | failures | infeasible | open | feasible | not bounded |",
+             "|---|---|---|---|---|---|---|"]
+    for pool, by_policy in b["failures"].items():
+        for name, c in by_policy.items():
+            flag = f" ({c['successes_on_infeasible']} successes on infeasible episodes!)" \
+                if c["successes_on_infeasible"] else ""
+            lines.append(f"| {pool} | {name} | {c['failures']} | {c['infeasible']} | {c['open']} | {c['feasible']} | "
+                         f"{c['unbounded']}{flag} |")
+    return [*lines, ""]

@@ -1,0 +1,306 @@
+"""What any robot could do in an episode: reachable-set bounds on success, for crowds that ignore the robot.
+
+Where the crowd does not react to the robot (a replayed recording, or simulated people who do not see it), the
+pedestrians' whole future is fixed by the episode's seed. Whether *some* robot could have reached the goal in time
+without touching anybody is then a geometric question, answered here on a grid over the scene, by two reachable
+sets stepped forward in time from the robot's start (`reach`):
+
+- **optimistic** (an upper bound on what any robot can do): a holonomic robot at up to `max_speed_mps` with no
+  acceleration or turn-rate limit, checked against pedestrians only every `optimistic_dt_s`. Every grid cell that
+  may hold a reachable point is kept: the set grows by `max_speed * optimistic_dt + h * sqrt(2)` per check (h the
+  cell side) and pedestrians shrink by half a cell diagonal. A pedestrian is ignored during its first
+  `SPAWN_WINDOW_S` in view (the env does not end an episode on a contact that began as a spawn; a robot riding
+  along such a pedestrian past that window is not modelled). An env step that can end within the goal
+  tolerance, clear of everybody then, counts as arrival. If this set never arrives before the time limit, **no
+  robot at that speed could have succeeded**: the episode is "infeasible", whatever the planner. Its first
+  arrival is a lower bound on any robot's time to goal.
+- **conservative** (a witness): a holonomic robot moving from grid centre to grid centre at most
+  `max_speed * dt_s` per env step, keeping at every step the clearance that makes the env's swept contact test
+  (closest approach of the two straight motions over the step) pass, and the env's wall test. If it reaches
+  the goal, a contact-free path exists for a holonomic robot at that speed: the episode is "feasible". The
+  benchmark's robot is a unicycle with acceleration limits, so a feasible episode may still be out of its reach.
+- otherwise "open": neither bound decides.
+
+Units: m, s. Grid: square cells of side h = `max_speed * dt_s / cells_per_step`, one centre exactly at the
+robot's start. The grid covers the scene, every pedestrian and the goal with a margin; outside it nothing
+stands, and any path leaving it can be projected back onto its border (projection onto a box is 1-Lipschitz),
+so the bounds hold for paths anywhere.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from envs.collisions import SPAWN_WINDOW_S
+from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from envs.env import CrowdNavEnv
+
+VERDICTS = ("infeasible", "feasible", "open")
+
+
+@dataclass(frozen=True)
+class ReachConfig:
+    """Grid settings. cells_per_step: the grid cell side is the robot's longest env step (max_speed * dt_s) divided
+    by this (1.2 m/s, 0.1 s: 0.024 m), so that the witness moves whole cells at full speed along the axes;
+    optimistic_dt_s: how often the optimistic set is checked against the pedestrians, s (a whole multiple of the
+    env's dt_s; coarser means a looser bound, but each check adds a cell diagonal of slack, so the default 0.2 s
+    keeps that at 0.17 m/s on top of the robot's 1.2 m/s)."""
+
+    cells_per_step: int = 5
+    optimistic_dt_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.cells_per_step, int) and 2 <= self.cells_per_step <= 20):
+            raise ValueError(f"cells_per_step must be an integer in [2, 20], got {self.cells_per_step!r}")
+        if not (0.0 < self.optimistic_dt_s <= 1.0):
+            raise ValueError(f"optimistic_dt_s must be in (0, 1] s, got {self.optimistic_dt_s}")
+
+    def steps_per_check(self, dt_s: float) -> int:
+        """Env steps between the optimistic set's checks; ValueError unless optimistic_dt_s is a whole multiple of
+        dt_s (s)."""
+        every = int(round(self.optimistic_dt_s / dt_s))
+        if every < 1 or abs(every * dt_s - self.optimistic_dt_s) > 1e-9:
+            raise ValueError(f"optimistic_dt_s {self.optimistic_dt_s} must be a whole multiple of the env step {dt_s}")
+        return every
+
+
+@dataclass
+class Course:
+    """One episode's fixed geometry, from the robot's start (time 0) to the time limit.
+
+    start, goal (2,) m; goal_tolerance_m; robot_radius_m; max_speed_mps; dt_s: env step, s; n_steps: the time
+    limit in env steps; walls (W, 2, 2) m; ped_pos: per env step k = 0..n_steps an (n_k, 2) array of positions, m;
+    ped_radius: per step (n_k,) m; ped_id: per step (n_k,) int; ped_fresh: per step (n_k,) bool, the pedestrian
+    came into view less than SPAWN_WINDOW_S ago.
+    """
+
+    start: np.ndarray
+    goal: np.ndarray
+    goal_tolerance_m: float
+    robot_radius_m: float
+    max_speed_mps: float
+    dt_s: float
+    n_steps: int
+    walls: np.ndarray
+    ped_pos: list[np.ndarray]
+    ped_radius: list[np.ndarray]
+    ped_id: list[np.ndarray]
+    ped_fresh: list[np.ndarray]
+
+
+@dataclass(frozen=True)
+class ReachResult:
+    """verdict: one of VERDICTS; earliest_arrival_s: the optimistic set's first arrival (a lower bound on any robot's
+    time to goal; None: infeasible); witness_arrival_s: the conservative set's first arrival (None: none found);
+    path: (k + 1, 2) m, the witness's position at each env step when asked for (`reach(..., witness_path=True)`)."""
+
+    verdict: str
+    earliest_arrival_s: float | None
+    witness_arrival_s: float | None
+    path: np.ndarray | None = None
+
+
+def crowd_is_fixed(config: CrowdNavConfig) -> bool:
+    """Whether the crowd's future does not depend on the robot (a replay, or a robot nobody sees)."""
+    return config.scenario == REPLAY_SCENARIO or not config.robot_visible
+
+
+def course_of(config: CrowdNavConfig, seed: int) -> Course:
+    """The episode `seed` of `config` as the env builds it (same start, goal and crowd), the crowd stepped to the
+    time limit with the robot parked at its start (it does not see the robot). Raises ValueError where the crowd
+    reacts to the robot."""
+    if not crowd_is_fixed(config):
+        raise ValueError("reachability needs a crowd that ignores the robot (a replay, or robot_visible false); "
+                         f"scenario {config.scenario!r} sees the robot")
+    cfg = replace(config, observation=replace(config.observation, predictions=False, group_source="truth"))
+    env = CrowdNavEnv(cfg)
+    env.reset(seed=seed)
+    crowd, dt = env.crowd, cfg.dt_s
+    age = getattr(crowd, "track_age_s", None)
+    first_seen: dict[int, int] = {}
+    pos, rad, pid, fresh = [], [], [], []
+    state = env._state
+    for k in range(cfg.max_steps + 1):
+        if k:
+            state = crowd.step()
+        act = state.active
+        ids = state.ped_id[act]
+        for i in ids:
+            first_seen.setdefault(int(i), k if k else -10**9)
+        if age is not None:
+            f = np.array([age(int(i)) < SPAWN_WINDOW_S - 1e-9 for i in ids], bool)
+        else:
+            f = np.array([(k - first_seen[int(i)]) * dt < SPAWN_WINDOW_S - 1e-9 for i in ids], bool)
+        pos.append(state.pos[act].copy())
+        rad.append(state.radius[act].copy())
+        pid.append(ids.copy())
+        fresh.append(f)
+    return Course(env.robot_state[:2].copy(), env.goal.copy(), cfg.goal_tolerance_m, cfg.robot.radius_m,
+                  cfg.robot.max_speed_mps, dt, cfg.max_steps, np.asarray(crowd.walls, float).reshape(-1, 2, 2),
+                  pos, rad, pid, fresh)
+
+
+class _Grid:
+    """Square cells of side h with one centre exactly at `origin_cell`'s point; centres x0 + i h, y0 + j h."""
+
+    def __init__(self, course: Course, h: float, margin_m: float) -> None:
+        pts = [course.start[None], course.goal[None], course.walls.reshape(-1, 2)]
+        pts += [p for p in course.ped_pos if len(p)]
+        allp = np.concatenate(pts)
+        lo, hi = allp.min(axis=0) - margin_m, allp.max(axis=0) + margin_m
+        below = np.ceil((course.start - lo) / h)
+        self.h = h
+        self.x0 = course.start - below * h  # so that the start is a centre
+        self.shape = tuple(int(n) for n in (np.ceil((hi - self.x0) / h) + 1).astype(int))
+        self.start = tuple(int(b) for b in below)
+        ii, jj = np.meshgrid(np.arange(self.shape[0]), np.arange(self.shape[1]), indexing="ij")
+        self.xy = np.stack([self.x0[0] + ii * h, self.x0[1] + jj * h], axis=-1)  # (nx, ny, 2) centres, m
+        self.goal_dist = np.hypot(*(self.xy - course.goal).transpose(2, 0, 1))
+        if len(course.walls):
+            flat = self.xy.reshape(-1, 2)
+            segs = course.walls.reshape(-1, 4)
+            self.wall_dist = np.min([_seg_dist(flat, s) for s in segs], axis=0).reshape(self.shape)
+        else:
+            self.wall_dist = np.full(self.shape, np.inf)
+
+    def blocked(self, pos: np.ndarray, clear: np.ndarray) -> np.ndarray:
+        """(nx, ny) bool: centres closer than clear[i] m to pedestrian i at pos[i] (n, 2)."""
+        out = np.zeros(self.shape, bool)
+        h = self.h
+        for p, c in zip(pos, clear, strict=True):
+            if c <= 0:
+                continue
+            lo = np.maximum(np.floor((p - c - self.x0) / h).astype(int), 0)
+            hi = np.minimum(np.ceil((p + c - self.x0) / h).astype(int) + 1, self.shape)
+            if np.any(hi <= lo):
+                continue
+            sub = self.xy[lo[0]:hi[0], lo[1]:hi[1]]
+            out[lo[0]:hi[0], lo[1]:hi[1]] |= np.hypot(sub[..., 0] - p[0], sub[..., 1] - p[1]) < c
+        return out
+
+
+def _seg_dist(xy: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Distances (M,) m from points xy (M, 2) to the segment seg (4,) = (x1, y1, x2, y2)."""
+    a, b = seg[:2], seg[2:]
+    e = b - a
+    ee = float(e @ e)
+    t = np.zeros(len(xy)) if ee == 0.0 else np.clip((xy - a) @ e / ee, 0.0, 1.0)
+    return np.hypot(*(xy - a - t[:, None] * e).T)
+
+
+def _distance(mask: np.ndarray, radius_m: float, h: float) -> np.ndarray:
+    """Distance (m) from each cell centre to the nearest marked centre (exact Euclidean), computed on the marked
+    cells' bounding box grown by radius_m; inf outside that box or with nothing marked."""
+    out = np.full(mask.shape, np.inf)
+    idx = np.argwhere(mask)
+    if len(idx) == 0:
+        return out
+    pad = int(math.ceil(radius_m / h)) + 1
+    lo = np.maximum(idx.min(axis=0) - pad, 0)
+    hi = np.minimum(idx.max(axis=0) + pad + 1, mask.shape)
+    out[lo[0]:hi[0], lo[1]:hi[1]] = distance_transform_edt(~mask[lo[0]:hi[0], lo[1]:hi[1]], sampling=h)
+    return out
+
+
+def _dilate(mask: np.ndarray, radius_m: float, h: float) -> np.ndarray:
+    """Cells whose centre lies within radius_m of a marked centre."""
+    return _distance(mask, radius_m, h) <= radius_m + 1e-9
+
+
+def _optimistic(course: Course, grid: _Grid, every: int) -> float | None:
+    """First time (s) the optimistic set can be at the goal, or None before the time limit (module docstring)."""
+    h, half_diag, step_m = grid.h, grid.h / math.sqrt(2.0), course.max_speed_mps * course.dt_s
+    free_wall = grid.wall_dist >= course.robot_radius_m - half_diag
+    near_goal = (grid.goal_dist < course.goal_tolerance_m + half_diag) & free_wall
+    reach = np.zeros(grid.shape, bool)
+    reach[grid.start] = True
+    for k in range(0, course.n_steps, every):
+        dist = _distance(reach, step_m * every + h * math.sqrt(2.0), h)
+        last = min(k + every, course.n_steps)
+        for j in range(k + 1, last + 1):  # a step ending at the goal, free of everybody then, succeeds
+            can = near_goal & (dist <= step_m * (j - k) + h * math.sqrt(2.0) + 1e-9)
+            if can.any() and (can & ~_blocked_opt(course, grid, j)).any():
+                return j * course.dt_s
+        reach = (dist <= step_m * (last - k) + h * math.sqrt(2.0) + 1e-9) & free_wall \
+            & ~_blocked_opt(course, grid, last)
+        if not reach.any():
+            return None
+    return None
+
+
+def _blocked_opt(course: Course, grid: _Grid, k: int) -> np.ndarray:
+    """Cells no point of which is clear of a pedestrian at env step k (fresh ones left out): centres within the
+    contact distance less half a cell diagonal."""
+    keep = ~course.ped_fresh[k]
+    clear = course.ped_radius[k][keep] + course.robot_radius_m - grid.h / math.sqrt(2.0)
+    return grid.blocked(course.ped_pos[k][keep], clear)
+
+
+def _swept_margin(course: Course) -> float:
+    """Extra clearance (m) at both ends of a step that keeps the closest approach of the two straight motions over
+    the step at least the contact distance: sqrt(R^2 + (L / 2)^2) - R, L the most the pair can move apart-wise in
+    one step (the robot's max_speed * dt plus the fastest pedestrian step), R the smallest contact distance."""
+    step = 0.0
+    for k in range(course.n_steps):
+        _, i, j = np.intersect1d(course.ped_id[k], course.ped_id[k + 1], return_indices=True)
+        if len(i):
+            step = max(step, float(np.max(np.hypot(*(course.ped_pos[k + 1][j] - course.ped_pos[k][i]).T))))
+    radii = [r for r in course.ped_radius if len(r)]
+    if not radii:
+        return 0.0
+    contact = float(np.min(np.concatenate(radii))) + course.robot_radius_m
+    half = 0.5 * (course.max_speed_mps * course.dt_s + step)
+    return math.sqrt(contact * contact + half * half) - contact
+
+
+def _conservative(course: Course, grid: _Grid, keep: bool) -> tuple[float | None, np.ndarray | None]:
+    """First time (s) the conservative set is at the goal (None: not before the time limit) and, if `keep`, a
+    witness path (k + 1, 2) m of grid centres, one per env step from the start (module docstring)."""
+    h, margin, step_m = grid.h, _swept_margin(course), course.max_speed_mps * course.dt_s
+    free_wall = grid.wall_dist >= course.robot_radius_m + 1e-6
+    at_goal = grid.goal_dist < course.goal_tolerance_m
+    reach = np.zeros(grid.shape, bool)
+    reach[grid.start] = True
+    history = [reach]
+    for k in range(1, course.n_steps + 1):
+        clear = course.ped_radius[k] + course.robot_radius_m + margin
+        reach = _dilate(reach, step_m, h) & free_wall & ~grid.blocked(course.ped_pos[k], clear)
+        if keep:
+            history.append(reach)
+        if np.any(reach & at_goal):
+            return k * course.dt_s, (_backtrack(grid, history, reach & at_goal, step_m) if keep else None)
+        if not reach.any():
+            break
+    return None, None
+
+
+def _backtrack(grid: _Grid, history: list[np.ndarray], end: np.ndarray, step_m: float) -> np.ndarray:
+    """Cell centres (len(history), 2) m of one path through the stored sets, ending in `end`, each within step_m of
+    the one before."""
+    cell = tuple(np.argwhere(end)[0])
+    path = [cell]
+    pad = int(math.ceil(step_m / grid.h)) + 1
+    for mask in history[-2::-1]:
+        lo = np.maximum(np.array(cell) - pad, 0)
+        cand = np.argwhere(mask[lo[0]:cell[0] + pad + 1, lo[1]:cell[1] + pad + 1]) + lo
+        d = np.hypot(*(cand - np.array(cell)).T) * grid.h
+        cell = tuple(cand[np.argmin(np.where(d <= step_m + 1e-9, d, np.inf))])
+        path.append(cell)
+    return np.array([grid.xy[c] for c in path[::-1]])
+
+
+def reach(course: Course, config: ReachConfig | None = None, witness_path: bool = False) -> ReachResult:
+    """Both bounds for one course (module docstring); with `witness_path`, the result holds the conservative
+    set's path (one grid centre per env step) when it found one."""
+    cfg = config or ReachConfig()
+    every = cfg.steps_per_check(course.dt_s)
+    h = course.max_speed_mps * course.dt_s / cfg.cells_per_step
+    grid = _Grid(course, h, margin_m=course.robot_radius_m + 4 * h + course.max_speed_mps * course.dt_s * every)
+    earliest = _optimistic(course, grid, every)
+    witness, path = _conservative(course, grid, witness_path) if earliest is not None else (None, None)
+    verdict = "infeasible" if earliest is None else "feasible" if witness is not None else "open"
+    return ReachResult(verdict, earliest, witness, path)

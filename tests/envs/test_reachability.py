@@ -1,0 +1,111 @@
+"""Reachable-set bounds: what any robot could do in an episode whose crowd ignores the robot."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from envs.config import CrowdNavConfig
+from envs.env import CrowdNavEnv
+from envs.evaluation.reachability import Course, ReachConfig, course_of, reach
+from planner import RobotConfig
+
+DT = 0.1
+
+
+def _course(goal: tuple[float, float], seconds: float, walls: list | None = None,
+            peds: list[tuple[np.ndarray, np.ndarray]] | None = None) -> Course:
+    """A hand-built course from (0, 0): peds is a list of (positions (T + 1, 2), radius) tracks."""
+    n = int(round(seconds / DT))
+    pos = [np.array([p[k] for p, _ in (peds or [])]).reshape(-1, 2) for k in range(n + 1)]
+    rad = [np.array([r for _, r in (peds or [])], float) for _ in range(n + 1)]
+    ids = [np.arange(len(peds or [])) for _ in range(n + 1)]
+    fresh = [np.zeros(len(peds or []), bool) for _ in range(n + 1)]
+    w = np.asarray(walls, float).reshape(-1, 2, 2) if walls else np.zeros((0, 2, 2))
+    return Course(np.zeros(2), np.asarray(goal, float), 0.3, 0.3, 1.2, DT, n, w, pos, rad, ids, fresh)
+
+
+def test_open_ground_bounds_bracket_the_straight_run() -> None:
+    r = reach(_course((10.0, 0.0), 20.0))
+    straight = (10.0 - 0.3) / 1.2  # 8.08 s at full speed
+    assert r.verdict == "feasible"
+    assert r.earliest_arrival_s <= straight <= r.witness_arrival_s <= straight + 1.0
+
+
+def test_a_goal_beyond_the_speed_limit_is_infeasible() -> None:
+    # 29.7 m to go in 20 s needs 1.49 m/s: out of reach even for the optimistic set's slack
+    assert reach(_course((30.0, 0.0), 20.0)).verdict == "infeasible"
+
+
+def _box(gap_m: float) -> list:
+    """A closed square room around the goal (4, 0), its left wall with a centred gap of gap_m."""
+    x0, x1, y0, y1, g = 2.0, 6.0, -2.0, 2.0, gap_m / 2
+    return [[(x0, y0), (x1, y0)], [(x1, y0), (x1, y1)], [(x1, y1), (x0, y1)],
+            [(x0, y1), (x0, g)], [(x0, -g), (x0, y0)]]
+
+
+@pytest.mark.parametrize(("gap", "verdict"), [(0.0, "infeasible"), (0.5, "infeasible"), (1.0, "feasible")])
+def test_a_door_narrower_than_the_robot_cannot_be_passed(gap: float, verdict: str) -> None:
+    assert reach(_course((4.0, 0.0), 20.0, walls=_box(gap))).verdict == verdict  # robot diameter 0.6 m
+
+
+def test_a_person_standing_on_the_goal_delays_every_robot() -> None:
+    n = int(20.0 / DT)
+    track = np.tile([3.0, 0.0], (n + 1, 1))
+    k0 = int(8.0 / DT)
+    track[k0:, 1] = 1.5 * DT * np.arange(n + 1 - k0)  # walks away at 1.5 m/s from 8 s: clear 0.6 m later
+    r = reach(_course((3.0, 0.0), 20.0, peds=[(track, 0.3)]))
+    assert r.verdict == "feasible"
+    assert 7.9 <= r.earliest_arrival_s <= r.witness_arrival_s <= 9.0
+    stays = np.tile([3.0, 0.0], (n + 1, 1))
+    assert reach(_course((3.0, 0.0), 20.0, peds=[(stays, 0.3)])).verdict == "infeasible"
+
+
+def test_optimistic_never_later_than_the_witness_on_random_crowds() -> None:
+    rng = np.random.default_rng(3)
+    n = int(15.0 / DT)
+    for _ in range(5):
+        peds = []
+        for _ in range(12):
+            p0, v = rng.uniform([1, -3], [9, 3]), rng.normal(0, 0.8, 2)
+            peds.append((p0 + np.arange(n + 1)[:, None] * DT * v, 0.3))
+        r = reach(_course((10.0, 0.0), 15.0, peds=peds))
+        if r.witness_arrival_s is not None:
+            assert r.earliest_arrival_s <= r.witness_arrival_s
+        assert (r.verdict == "infeasible") == (r.earliest_arrival_s is None)
+
+
+def test_config_rejects_bad_values() -> None:
+    with pytest.raises(ValueError, match="cells_per_step"):
+        ReachConfig(cells_per_step=1)
+    with pytest.raises(ValueError, match="whole multiple"):
+        reach(_course((3.0, 0.0), 5.0), ReachConfig(optimistic_dt_s=0.25))
+
+
+def test_a_visible_robot_has_no_fixed_course() -> None:
+    with pytest.raises(ValueError, match="ignores the robot"):
+        course_of(CrowdNavConfig(scenario="corridor", n_pedestrians=10, robot_visible=True), 0)
+
+
+@pytest.mark.slow
+def test_the_witness_path_driven_in_the_env_succeeds_without_contact() -> None:
+    """The conservative verdict is a claim about the env: its path, driven there by a holonomic robot, must reach the
+    goal with no contact, and the crowd the env shows on the way must be the course's crowd."""
+    robot = RobotConfig(model="holonomic", max_accel_mps2=1000.0)
+    cfg = CrowdNavConfig(scenario="corridor", n_pedestrians=40, robot_visible=False, robot=robot, time_limit_s=30.0)
+    seed = 2
+    course = course_of(cfg, seed)
+    r = reach(course, witness_path=True)
+    assert r.verdict == "feasible" and r.path is not None
+    env = CrowdNavEnv(cfg)
+    env.reset(seed=seed)
+    np.testing.assert_array_equal(env.robot_state[:2], r.path[0])
+    done, info, k = False, {}, 0
+    while not done:
+        k += 1
+        _, _, terminated, truncated, info = env.step_control((r.path[k] - env.robot_state[:2]) / DT)
+        np.testing.assert_allclose(env.pedestrians().pos, course.ped_pos[k], atol=1e-12)
+        done = terminated or truncated
+    m = info["episode_metrics"]
+    assert m["success"] and not m["collision"]
+    assert k * DT == pytest.approx(r.witness_arrival_s)
