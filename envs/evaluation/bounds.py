@@ -2,11 +2,14 @@
 ignores the robot (the real cells and the invisible-robot cells), resumable, and its summary.
 
 One JSON line per episode in `<out>/bounds.jsonl`: {"cell", "seed", "verdict", "earliest_arrival_s",
-"witness_arrival_s", "fingerprint", "reach" (the grid, `ReachConfig`), "wall_time_s"}. A rerun with the same
-`--out` skips the episodes already there (a killed run resumes); a line made under other settings (suite version,
-cell, grid) raises. The benchmark's leaderboard reads this file when it lies in the same folder: a failure on an
-"infeasible" episode is one no robot could have avoided. Cells where people see the robot have no fixed course:
-they are listed as skipped.
+"witness_arrival_s", "robot_witness", "fingerprint", "reach" (the grid, `ReachConfig`), "wall_time_s"}.
+robot_witness (feasible episodes only, else null): "success" when the benchmark's own robot, tracking a roomier
+witness path in the env (`envs.evaluation.witness`, ROBOT_ATTEMPTS), wins the episode, "failed" otherwise.
+
+A rerun with the same `--out` skips the episodes already there (a killed run resumes); a line made under other
+settings (suite version, cell, grid) raises. The benchmark's leaderboard reads this file when it lies in the same
+folder: a failure on an "infeasible" episode is one no robot could have avoided. Cells where people see the robot
+have no fixed course: they are listed as skipped.
 """
 
 from __future__ import annotations
@@ -22,11 +25,14 @@ from typing import Any
 from envs.atomic import append_line, check_writable_dir, write_text_atomic
 from envs.config import CrowdNavConfig
 from envs.evaluation.episode import fingerprint
-from envs.evaluation.reachability import VERDICTS, ReachConfig, course_of, crowd_is_fixed, reach
+from envs.evaluation.reachability import VERDICTS, ReachConfig, course_of, crowd_is_fixed, reach, roomy_path
 from envs.evaluation.suite import DEFAULT_DATA, Cell, Suite
+from envs.evaluation.witness import track
 
 BOUNDS = "bounds.jsonl"
-METHOD_VERSION = 1  # bump when the bound's computation changes (old lines then no longer match)
+METHOD_VERSION = 2  # bump when the bound's computation changes (old lines then no longer match)
+# (speed fraction, extra clearance m) of the roomy witness paths the benchmark's robot tracks, tried in order
+ROBOT_ATTEMPTS = ((0.85, 0.1), (0.7, 0.2), (1.0, 0.1))
 _FIELDS = {"cell": str, "seed": int, "verdict": str, "fingerprint": str, "reach": dict}
 
 
@@ -44,10 +50,19 @@ class BoundTask:
 def run_bound_task(task: BoundTask) -> dict[str, Any]:
     """The bound line of one episode (module docstring)."""
     start = time.perf_counter()
-    r = reach(course_of(task.config, task.seed), task.reach)
+    course = course_of(task.config, task.seed)
+    r = reach(course, task.reach)
+    robot = None
+    if r.verdict == "feasible":  # can the benchmark's own robot win it too? (envs.evaluation.witness)
+        robot = "failed"
+        for fraction, extra in ROBOT_ATTEMPTS:
+            path = roomy_path(course, task.reach, fraction, extra)
+            if path is not None and track(task.config, task.seed, path) == "success":
+                robot = "success"
+                break
     return {"cell": task.cell, "seed": task.seed, "verdict": r.verdict, "earliest_arrival_s": r.earliest_arrival_s,
-            "witness_arrival_s": r.witness_arrival_s, "fingerprint": task.fingerprint, "reach": asdict(task.reach),
-            "wall_time_s": round(time.perf_counter() - start, 3)}
+            "witness_arrival_s": r.witness_arrival_s, "robot_witness": robot, "fingerprint": task.fingerprint,
+            "reach": asdict(task.reach), "wall_time_s": round(time.perf_counter() - start, 3)}
 
 
 def bound_fingerprint(suite: Suite, cell: Cell, config: ReachConfig) -> str:
@@ -156,14 +171,16 @@ def run_bounds(suite: Suite, cells: Sequence[Cell], out: str | Path, *, config: 
 
 def bounds_summary(suite: Suite, cells: Sequence[Cell], lines: dict[tuple[str, int], dict[str, Any]]) -> dict[str, Any]:
     """Per cell and pool (real, synthetic): episodes, verdict counts, the success ceiling (share of episodes not
-    proven infeasible: no policy can do better) and the floor of what a holonomic robot could do (share proven
-    feasible), and the mean earliest arrival over the feasible-or-open episodes."""
+    proven infeasible: no policy can do better), the floor of what a holonomic robot could do (share proven
+    feasible) and of what the benchmark's robot could do (share it won tracking a witness), and the mean earliest
+    arrival over the feasible-or-open episodes."""
     def count(rows: list[dict[str, Any]]) -> dict[str, Any]:
         n = len(rows)
         c = {v: sum(r["verdict"] == v for r in rows) for v in VERDICTS}
         arrivals = [r["earliest_arrival_s"] for r in rows if r["earliest_arrival_s"] is not None]
-        return {"episodes": n, **c, "success_ceiling": (n - c["infeasible"]) / n if n else None,
-                "holonomic_floor": c["feasible"] / n if n else None,
+        won = sum(r.get("robot_witness") == "success" for r in rows)
+        return {"episodes": n, **c, "robot_wins": won, "success_ceiling": (n - c["infeasible"]) / n if n else None,
+                "holonomic_floor": c["feasible"] / n if n else None, "robot_floor": won / n if n else None,
                 "mean_earliest_arrival_s": sum(arrivals) / len(arrivals) if arrivals else None}
 
     per_cell = {c.name: count([lines[(c.name, s)] for s in c.seeds if (c.name, s) in lines]) for c in cells}
@@ -182,14 +199,16 @@ def bounds_table(summary: dict[str, Any]) -> list[str]:
              "Episodes whose crowd ignores the robot (real cells, invisible robot), by reachable sets over the "
              "scene (envs.evaluation.reachability): infeasible = no robot at the robot's top speed could reach the "
              "goal in time without contact; feasible = a holonomic robot at that speed has a contact-free path; open "
-             "= neither bound decides. Success ceiling = share not infeasible (no policy can do better).", "",
-             "| cell or pool | episodes | infeasible | open | feasible | success ceiling | holonomic floor | "
-             "earliest arrival (s, mean) |", "|---|---|---|---|---|---|---|---|"]
+             "= neither bound decides; robot wins = feasible episodes the benchmark's own robot won, knowing the "
+             "future, by tracking a witness path in the env. Success ceiling = share not infeasible (no policy can "
+             "do better); robot floor = share the robot won (a policy with foresight can do at least that).", "",
+             "| cell or pool | episodes | infeasible | open | feasible | robot wins | success ceiling | robot floor | "
+             "earliest arrival (s, mean) |", "|---|---|---|---|---|---|---|---|---|"]
     rows = [*summary["cells"].items(), *((f"**pooled {k}**", v) for k, v in summary["pooled"].items())]
     for where, c in rows:
         arr = "–" if c["mean_earliest_arrival_s"] is None else f"{c['mean_earliest_arrival_s']:.1f}"
         lines.append(f"| {where} | {c['episodes']} | {c['infeasible']} | {c['open']} | {c['feasible']} | "
-                     f"{c['success_ceiling']:.2f} | {c['holonomic_floor']:.2f} | {arr} |")
+                     f"{c['robot_wins']} | {c['success_ceiling']:.2f} | {c['robot_floor']:.2f} | {arr} |")
     if summary.get("skipped"):
         lines += ["", f"Not bounded (people there see the robot, so its course depends on the robot): "
                       f"{', '.join(summary['skipped'])}."]

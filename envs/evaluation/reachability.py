@@ -257,11 +257,14 @@ def _swept_margin(course: Course) -> float:
     return math.sqrt(contact * contact + half * half) - contact
 
 
-def _conservative(course: Course, grid: _Grid, keep: bool) -> tuple[float | None, np.ndarray | None]:
+def _conservative(course: Course, grid: _Grid, keep: bool, speed_mps: float | None = None,
+                  extra_m: float = 0.0) -> tuple[float | None, np.ndarray | None]:
     """First time (s) the conservative set is at the goal (None: not before the time limit) and, if `keep`, a
-    witness path (k + 1, 2) m of grid centres, one per env step from the start (module docstring)."""
-    h, margin, step_m = grid.h, _swept_margin(course), course.max_speed_mps * course.dt_s
-    free_wall = grid.wall_dist >= course.robot_radius_m + 1e-6
+    witness path (k + 1, 2) m of grid centres, one per env step from the start (module docstring). speed_mps: the
+    witness's top speed (default the robot's); extra_m: clearance kept beyond the contact test, m."""
+    speed = course.max_speed_mps if speed_mps is None else speed_mps
+    h, margin, step_m = grid.h, _swept_margin(course) + extra_m, speed * course.dt_s
+    free_wall = grid.wall_dist >= course.robot_radius_m + extra_m + 1e-6
     at_goal = grid.goal_dist < course.goal_tolerance_m
     reach = np.zeros(grid.shape, bool)
     reach[grid.start] = True
@@ -304,3 +307,15 @@ def reach(course: Course, config: ReachConfig | None = None, witness_path: bool 
     witness, path = _conservative(course, grid, witness_path) if earliest is not None else (None, None)
     verdict = "infeasible" if earliest is None else "feasible" if witness is not None else "open"
     return ReachResult(verdict, earliest, witness, path)
+
+
+def roomy_path(course: Course, config: ReachConfig | None = None, speed_fraction: float = 0.85,
+               extra_m: float = 0.1) -> np.ndarray | None:
+    """A conservative witness path (k + 1, 2) m, one point per env step, for a slower robot (speed_fraction of the
+    top speed) that keeps extra_m more clearance from people and walls: room for a robot with acceleration and
+    turn-rate limits to track it (`envs.evaluation.witness`). None where there is none before the time limit."""
+    cfg = config or ReachConfig()
+    every = cfg.steps_per_check(course.dt_s)
+    h = course.max_speed_mps * course.dt_s / cfg.cells_per_step
+    grid = _Grid(course, h, margin_m=course.robot_radius_m + 4 * h + course.max_speed_mps * course.dt_s * every)
+    return _conservative(course, grid, True, speed_fraction * course.max_speed_mps, extra_m)[1]

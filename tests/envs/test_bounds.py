@@ -25,6 +25,7 @@ def test_bounds_resume_skip_seen_robots_and_class_failures_in_the_leaderboard(tm
     # 2 s cannot cover the 12 m across the circle at 1.2 m/s: no robot could succeed
     assert first["skipped"] == ["corridor-seen"]
     assert first["cells"]["circle-short"]["infeasible"] == 2 and first["cells"]["circle-short"]["success_ceiling"] == 0
+    assert all(line["robot_witness"] is None for line in read_bounds(tmp_path / BOUNDS).values())  # infeasible
     again = run_bounds(suite, suite.cells, tmp_path, progress=False)
     assert again["run"]["episodes_run"] == 0 and again["run"]["episodes_resumed"] == 2
     board = run_benchmark(suite, suite.cells, [PolicyConfig("random")], tmp_path, progress=False)
@@ -74,3 +75,12 @@ def test_cli_bounds_prints_the_table_and_resumes(tmp_path, capsys):
     assert "| circle-low-invisible | 2 |" in out and "Not bounded" in out and "2 episodes computed" in out
     assert main(args) == 0
     assert "0 episodes computed, 2 already there" in capsys.readouterr().out
+
+
+def test_a_feasible_episode_is_tried_with_the_benchmark_robot(tmp_path):
+    spec = {**SUITE, "defaults": {"time_limit_s": 20.0}, "cells": SUITE["cells"][:1]}
+    summary = run_bounds(parse_suite(spec), parse_suite(spec).cells, tmp_path, progress=False)
+    lines = read_bounds(tmp_path / BOUNDS)
+    assert {line["verdict"] for line in lines.values()} == {"feasible"}  # 3 people in a 12 m circle, 20 s
+    assert {line["robot_witness"] for line in lines.values()} == {"success"}
+    assert summary["cells"]["circle-short"]["robot_floor"] == 1.0
