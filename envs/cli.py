@@ -113,8 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--data", type=Path, default=DEFAULT_DATA, metavar="DIR", help="ETH/UCY folder for the real cells")
     r.add_argument("--cells-per-step", type=int, default=5, metavar="N",
                    help="grid cells per robot step at full speed (finer: tighter bounds, slower)")
-    r.add_argument("--optimistic-dt", type=float, default=0.2, metavar="S",
-                   help="how often the optimistic set is checked against the people, s (a multiple of the env step)")
+    r.add_argument("--optimistic-dt", type=float, default=None, metavar="S",
+                   help="how often the optimistic set is checked against the people, s (a multiple of the env step; "
+                   "default: the smallest multiple >= 0.2 s)")
     r.add_argument("--workers", type=int, default=default_workers())
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
 

@@ -120,12 +120,12 @@ def plan_bounds(suite: Suite, cells: Sequence[Cell], done: dict[tuple[str, int],
         if not crowd_is_fixed(cell.env_config(cell.seeds[0], data)):
             skipped.append(cell.name)
             continue
-        config.steps_per_check(cell.env_config(cell.seeds[0], data).dt_s)
-        fp = bound_fingerprint(suite, cell, config)
+        grid = config.resolved(cell.env_config(cell.seeds[0], data).dt_s)
+        fp = bound_fingerprint(suite, cell, grid)
         for seed in cell.seeds:
             old = done.get((cell.name, seed))
             if old is None:
-                todo.append(BoundTask(cell.env_config(seed, data), seed, cell.name, fp, config))
+                todo.append(BoundTask(cell.env_config(seed, data), seed, cell.name, fp, grid))
             elif old["fingerprint"] != fp:
                 raise ValueError(f"the bounds file holds {cell.name}/seed {seed} made under other settings (another "
                                  "suite version or grid); use a new --out folder")
@@ -164,7 +164,7 @@ def run_bounds(suite: Suite, cells: Sequence[Cell], out: str | Path, *, config: 
     summary = bounds_summary(suite, cells, lines)
     summary["skipped"] = skipped
     summary["run"] = {"episodes_run": len(todo), "episodes_resumed": len(wanted) - len(todo),
-                      "wall_time_s": time.perf_counter() - start, "grid": asdict(cfg)}
+                      "wall_time_s": time.perf_counter() - start}
     write_text_atomic(out / "bounds.md", "\n".join(bounds_table(summary)) + "\n")
     return summary
 

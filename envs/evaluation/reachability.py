@@ -40,28 +40,42 @@ from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.env import CrowdNavEnv
 
 VERDICTS = ("infeasible", "feasible", "open")
+DEFAULT_CHECK_S = 0.2  # the optimistic set's check period by default: the smallest multiple of the env step >= this
 
 
 @dataclass(frozen=True)
 class ReachConfig:
     """Grid settings. cells_per_step: the grid cell side is the robot's longest env step (max_speed * dt_s) divided
     by this (1.2 m/s, 0.1 s: 0.024 m), so that the witness moves whole cells at full speed along the axes;
-    optimistic_dt_s: how often the optimistic set is checked against the pedestrians, s (a whole multiple of the
+    optimistic_dt_s: how often the optimistic set is checked against the pedestrians, s (None: the smallest whole
+    multiple of the env step that is at least DEFAULT_CHECK_S; else a whole multiple of the
     env's dt_s; coarser means a looser bound, but each check adds a cell diagonal of slack, so the default 0.2 s
     keeps that at 0.17 m/s on top of the robot's 1.2 m/s)."""
 
     cells_per_step: int = 5
-    optimistic_dt_s: float = 0.2
+    optimistic_dt_s: float | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.cells_per_step, int) and 2 <= self.cells_per_step <= 20):
             raise ValueError(f"cells_per_step must be an integer in [2, 20], got {self.cells_per_step!r}")
-        if not (0.0 < self.optimistic_dt_s <= 1.0):
+        if self.optimistic_dt_s is not None and not (0.0 < self.optimistic_dt_s <= 1.0):
             raise ValueError(f"optimistic_dt_s must be in (0, 1] s, got {self.optimistic_dt_s}")
+
+    def resolved(self, dt_s: float) -> ReachConfig:
+        """This config with optimistic_dt_s set for an env step of dt_s (s); ValueError if it is not a whole
+        multiple of it."""
+        check = self.optimistic_dt_s
+        if check is None:
+            check = dt_s * math.ceil(DEFAULT_CHECK_S / dt_s - 1e-9)
+        out = ReachConfig(self.cells_per_step, round(check, 12))
+        out.steps_per_check(dt_s)
+        return out
 
     def steps_per_check(self, dt_s: float) -> int:
         """Env steps between the optimistic set's checks; ValueError unless optimistic_dt_s is a whole multiple of
         dt_s (s)."""
+        if self.optimistic_dt_s is None:
+            return self.resolved(dt_s).steps_per_check(dt_s)
         every = int(round(self.optimistic_dt_s / dt_s))
         if every < 1 or abs(every * dt_s - self.optimistic_dt_s) > 1e-9:
             raise ValueError(f"optimistic_dt_s {self.optimistic_dt_s} must be a whole multiple of the env step {dt_s}")

@@ -125,3 +125,10 @@ def test_the_benchmark_robot_wins_a_dense_corridor_by_tracking_a_roomy_witness()
     assert track(cfg, 3, path) == "success"
     with pytest.raises(ValueError, match="start"):
         track(cfg, 3, path + 1.0)
+
+
+def test_the_default_check_period_follows_the_env_step() -> None:
+    assert ReachConfig().resolved(0.1).optimistic_dt_s == pytest.approx(0.2)
+    assert ReachConfig().resolved(0.25).optimistic_dt_s == pytest.approx(0.25)  # CrowdNav's step
+    with pytest.raises(ValueError, match="whole multiple"):
+        ReachConfig(optimistic_dt_s=0.3).resolved(0.25)
