@@ -8,8 +8,8 @@ opens later, or by waiting. `SpaceTimeSearch.subgoal` looks for it:
 
 1. A local grid (``cell_m``) around the robot, as wide as the robot can go over the horizon.
 2. Every ``step_s`` up to the horizon, the cells whose centre keeps robot radius + person radius + ``clearance_m``
-   from every predicted sample of every person (positions interpolated between the prediction's steps, from the
-   people's positions now), and the MPC's wall clearance from every wall.
+   from every representative predicted sample (the MPC's ``n_modes``) of every person (positions interpolated
+   between the prediction's steps, from the people's positions now), and the MPC's wall clearance from every wall.
 3. Reachable sets: from the robot's cell, grown by the robot's top speed times ``step_s`` (Euclidean, on cell
    centres), cut to the free cells, step by step.
 4. If some reachable cell is within ``goal_reach_m`` of the goal, the goal is the subgoal. If the set lives to the
@@ -31,15 +31,16 @@ from scipy.ndimage import distance_transform_edt
 
 from planner.config import SpaceTimeConfig
 from planner.prediction import PedPrediction, current_positions
-from planner.scene import point_segment_distances
+from planner.scene import point_segment_distances, select_modes
 
 
 class SpaceTimeSearch:
     """`subgoal` as in the module docstring; speed_mps the robot's top speed, horizon_s the MPC's horizon."""
 
     def __init__(self, config: SpaceTimeConfig, speed_mps: float, horizon_s: float, robot_radius_m: float,
-                 wall_clearance_m: float) -> None:
+                 wall_clearance_m: float, n_modes: int = 3) -> None:
         self.config = config
+        self.n_modes = n_modes
         self.speed_mps = speed_mps
         self.horizon_s = horizon_s
         self.robot_radius_m = robot_radius_m
@@ -58,7 +59,7 @@ class SpaceTimeSearch:
         axis = cfg.cell_m * np.arange(-k, k + 1)
         xy = position + np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1)  # (G, G, 2), centre = robot
         free_walls = self._free_of_walls(xy, walls)
-        tracks = _tracks(prediction, cfg.step_s, n_steps)  # (n_steps + 1, S, 2), S = samples x people
+        tracks = _tracks(prediction, cfg.step_s, n_steps, self.n_modes)  # (n_steps + 1, S, 2), S = modes x people
         radii = np.tile(np.asarray(prediction.radii, float)[prediction.mask], tracks.shape[1] // max(
             1, int(prediction.mask.sum())))
         clear = radii + self.robot_radius_m + cfg.clearance_m
@@ -101,11 +102,15 @@ class SpaceTimeSearch:
         return d >= self.robot_radius_m + self.wall_clearance_m
 
 
-def _tracks(prediction: PedPrediction, step_s: float, n_steps: int) -> np.ndarray:
-    """Positions (n_steps + 1, K * N_real, 2) m of every sample of every real person at 0, step_s, ... (linear
-    between the prediction's steps, held after its last)."""
+def _tracks(prediction: PedPrediction, step_s: float, n_steps: int, n_modes: int) -> np.ndarray:
+    """Positions (n_steps + 1, k * N_real, 2) m of the k = min(n_modes, K) representative samples (the MPC's own
+    choice, `scene.select_modes`) of every real person at 0, step_s, ... (linear between the prediction's steps, held
+    after its last)."""
     mask = np.asarray(prediction.mask, bool)
-    pos = np.asarray(prediction.positions, float)[:, :, mask]  # (K, T, n, 2)
+    pos = np.asarray(prediction.positions, float)
+    if pos.shape[0] > n_modes:
+        pos = select_modes(pos, np.asarray(prediction.group_ids), mask, n_modes)
+    pos = pos[:, :, mask]  # (k, T, n, 2)
     now = current_positions(prediction)[mask]
     k, t = pos.shape[:2]
     full = np.concatenate([np.broadcast_to(now, (k, 1, *now.shape)), pos], axis=1)  # (K, T + 1, n, 2)
