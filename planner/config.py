@@ -110,13 +110,16 @@ class SpaceTimeConfig:
     clearance_m: float = 0.1  # kept beyond robot radius + person radius from every predicted sample
     goal_reach_m: float = 0.5  # a reachable cell this near the goal makes the goal the subgoal
     lead_s: float = 1.6  # the subgoal is the searched path's point this far ahead
+    spread_inflation: float = 0.5  # clearance added per metre of the samples' RMS spread about their mean, m/m
+    max_inflation_m: float = 0.5  # cap on that inflation, m
 
     def __post_init__(self) -> None:
         for name in ("cell_m", "step_s", "goal_reach_m", "lead_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"SpaceTimeConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
-            raise ValueError(f"SpaceTimeConfig.clearance_m must be >= 0, got {self.clearance_m!r}")
+        for name in ("clearance_m", "spread_inflation", "max_inflation_m"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"SpaceTimeConfig.{name} must be >= 0, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)

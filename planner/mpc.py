@@ -83,8 +83,7 @@ class MPCPlanner:
         st, cfg = self.config.spacetime, self.config
         self.spacetime = None if st is None else SpaceTimeSearch(st, cfg.robot.max_speed_mps,
                                                                  cfg.horizon_steps * cfg.dt_s, cfg.robot.radius_m,
-                                                                 cfg.wall_clearance_m - cfg.robot.radius_m,
-                                                                 cfg.n_modes)
+                                                                 cfg.wall_clearance_m - cfg.robot.radius_m)
 
     def reset(self) -> None:
         """Forget the stored plan (warm start and fallback), the shield's last command and the route; keep the

@@ -8,8 +8,9 @@ opens later, or by waiting. `SpaceTimeSearch.subgoal` looks for it:
 
 1. A local grid (``cell_m``) around the robot, as wide as the robot can go over the horizon.
 2. Every ``step_s`` up to the horizon, the cells whose centre keeps robot radius + person radius + ``clearance_m``
-   from every representative predicted sample (the MPC's ``n_modes``) of every person (positions interpolated
-   between the prediction's steps, from the people's positions now), and the MPC's wall clearance from every wall.
+   + ``spread_inflation`` x the samples' spread (capped at ``max_inflation_m``) from every person's sample mean
+   (interpolated between the prediction's steps, from the people's positions now), and the MPC's wall clearance
+   from every wall.
 3. Reachable sets: from the robot's cell, grown by the robot's top speed times ``step_s`` (Euclidean, on cell
    centres), cut to the free cells, step by step.
 4. If some reachable cell is within ``goal_reach_m`` of the goal, the goal is the subgoal. If the set lives to the
@@ -31,16 +32,15 @@ from scipy.ndimage import distance_transform_edt
 
 from planner.config import SpaceTimeConfig
 from planner.prediction import PedPrediction, current_positions
-from planner.scene import point_segment_distances, select_modes
+from planner.scene import point_segment_distances
 
 
 class SpaceTimeSearch:
     """`subgoal` as in the module docstring; speed_mps the robot's top speed, horizon_s the MPC's horizon."""
 
     def __init__(self, config: SpaceTimeConfig, speed_mps: float, horizon_s: float, robot_radius_m: float,
-                 wall_clearance_m: float, n_modes: int = 3) -> None:
+                 wall_clearance_m: float) -> None:
         self.config = config
-        self.n_modes = n_modes
         self.speed_mps = speed_mps
         self.horizon_s = horizon_s
         self.robot_radius_m = robot_radius_m
@@ -59,12 +59,12 @@ class SpaceTimeSearch:
         axis = cfg.cell_m * np.arange(-k, k + 1)
         xy = position + np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1)  # (G, G, 2), centre = robot
         free_walls = self._free_of_walls(xy, walls)
-        tracks = _tracks(prediction, cfg.step_s, n_steps, self.n_modes)  # (n_steps + 1, S, 2), S = modes x people
-        radii = np.tile(np.asarray(prediction.radii, float)[prediction.mask], tracks.shape[1] // max(
-            1, int(prediction.mask.sum())))
-        clear = radii + self.robot_radius_m + cfg.clearance_m
-        near = np.any(np.all(np.abs(tracks - position) <= half + clear[None, :, None], axis=-1), axis=0)
-        tracks, clear = tracks[:, near], clear[near]  # only the samples that ever enter the grid
+        tracks, spread = _tracks(prediction, cfg.step_s, n_steps)  # (n_steps + 1, n, 2), (n_steps + 1, n)
+        radii = np.asarray(prediction.radii, float)[np.asarray(prediction.mask, bool)]
+        clear = radii + self.robot_radius_m + cfg.clearance_m \
+            + np.minimum(cfg.max_inflation_m, cfg.spread_inflation * spread)  # (n_steps + 1, n)
+        near = np.any(np.all(np.abs(tracks - position) <= half + clear[..., None], axis=-1), axis=0)
+        tracks, clear = tracks[:, near], clear[:, near]  # only the people who ever enter the grid
         reach = np.zeros(xy.shape[:2], bool)
         reach[k, k] = True
         alive, last = reach, 0
@@ -102,29 +102,26 @@ class SpaceTimeSearch:
         return d >= self.robot_radius_m + self.wall_clearance_m
 
 
-def _tracks(prediction: PedPrediction, step_s: float, n_steps: int, n_modes: int) -> np.ndarray:
-    """Positions (n_steps + 1, k * N_real, 2) m of the k = min(n_modes, K) representative samples (the MPC's own
-    choice, `scene.select_modes`) of every real person at 0, step_s, ... (linear between the prediction's steps, held
-    after its last)."""
+def _tracks(prediction: PedPrediction, step_s: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The sample mean (n_steps + 1, N_real, 2) m of every real person at 0, step_s, ... and the samples' RMS distance
+    from it (n_steps + 1, N_real) m (both linear between the prediction's steps, held after its last)."""
     mask = np.asarray(prediction.mask, bool)
-    pos = np.asarray(prediction.positions, float)
-    if pos.shape[0] > n_modes:
-        pos = select_modes(pos, np.asarray(prediction.group_ids), mask, n_modes)
-    pos = pos[:, :, mask]  # (k, T, n, 2)
+    pos = np.asarray(prediction.positions, float)[:, :, mask]  # (K, T, n, 2)
     now = current_positions(prediction)[mask]
-    k, t = pos.shape[:2]
-    full = np.concatenate([np.broadcast_to(now, (k, 1, *now.shape)), pos], axis=1)  # (K, T + 1, n, 2)
+    mean = np.concatenate([now[None], pos.mean(axis=0)])  # (T + 1, n, 2)
+    rms = np.concatenate([np.zeros((1, len(now))), np.sqrt(((pos - pos.mean(axis=0)) ** 2).sum(-1).mean(0))])
+    t = pos.shape[1]
     times = prediction.step_s * np.arange(t + 1)
     want = np.minimum(step_s * np.arange(n_steps + 1), times[-1])
     i = np.clip(np.searchsorted(times, want, side="right") - 1, 0, t - 1)
-    w = ((want - times[i]) / prediction.step_s)[None, :, None, None]
-    out = full[:, i] * (1 - w) + full[:, i + 1] * w  # (K, n_steps + 1, n, 2)
-    return out.transpose(1, 0, 2, 3).reshape(n_steps + 1, -1, 2)
+    w = (want - times[i]) / prediction.step_s
+    return mean[i] * (1 - w)[:, None, None] + mean[i + 1] * w[:, None, None], rms[i] * (1 - w)[:, None] \
+        + rms[i + 1] * w[:, None]
 
 
 def _blocked(xy: np.ndarray, tracks: np.ndarray, clear: np.ndarray) -> np.ndarray:
-    """(T, G, G) bool: at each of the T rows of tracks (T, S, 2), the cell centres closer than clear[i] to sample i;
-    one stencil for all, vectorised."""
+    """(T, G, G) bool: at each of the T rows of tracks (T, S, 2), the cell centres closer than clear[t, i] to person
+    i; one stencil for all, vectorised."""
     out = np.zeros((len(tracks), *xy.shape[:2]), bool)
     if tracks.shape[1] == 0:
         return out
@@ -134,7 +131,7 @@ def _blocked(xy: np.ndarray, tracks: np.ndarray, clear: np.ndarray) -> np.ndarra
     stencil = np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)  # (M, 2)
     idx = np.floor((tracks - origin) / h).astype(int)[..., None, :] + stencil  # (T, S, M, 2)
     gap = origin + idx * h - tracks[..., None, :]
-    hit = (gap[..., 0] ** 2 + gap[..., 1] ** 2 < (clear ** 2)[None, :, None]) & np.all(idx >= 0, axis=-1) \
+    hit = (gap[..., 0] ** 2 + gap[..., 1] ** 2 < (clear ** 2)[:, :, None]) & np.all(idx >= 0, axis=-1) \
         & np.all(idx < np.array(xy.shape[:2]), axis=-1)
     t = np.broadcast_to(np.arange(len(tracks))[:, None, None], hit.shape)
     out[t[hit], idx[hit][:, 0], idx[hit][:, 1]] = True
