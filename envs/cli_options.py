@@ -18,7 +18,7 @@ from envs.config import DEFAULT_PREDICTOR
 from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
-from planner import LaneConfig, RouteConfig
+from planner import LaneConfig, RouteConfig, SpaceTimeConfig
 
 if TYPE_CHECKING:
     from envs.evaluation.suite import Suite
@@ -115,7 +115,8 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-NESTED = {"route": RouteConfig, "lane": LaneConfig}  # --mpc FIELD=default gives these configs
+NESTED = {"route": RouteConfig, "lane": LaneConfig,  # --mpc FIELD=default gives these configs
+          "spacetime": SpaceTimeConfig}
 
 
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:

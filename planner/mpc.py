@@ -17,6 +17,7 @@ from planner.result import PlanResult, PlanStats
 from planner.route import Router
 from planner.scene import build_scene, validate_obstacles
 from planner.shield import shield_control
+from planner.spacetime import SpaceTimeSearch
 
 IPOPT_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 HEADING_OFFSETS_RAD = (0.0, -0.6, 0.6, -1.2, 1.2)  # first-guess directions relative to the goal
@@ -79,6 +80,10 @@ class MPCPlanner:
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
         lane = self.config.lane
         self.lanes = LaneKeeper(lane, self.config.wall_clearance_m) if lane is not None else None
+        st, cfg = self.config.spacetime, self.config
+        self.spacetime = None if st is None else SpaceTimeSearch(st, cfg.robot.max_speed_mps,
+                                                                 cfg.horizon_steps * cfg.dt_s, cfg.robot.radius_m,
+                                                                 cfg.wall_clearance_m - cfg.robot.radius_m)
 
     def reset(self) -> None:
         """Forget the stored plan (warm start and fallback), the shield's last command and the route; keep the
@@ -121,6 +126,8 @@ class MPCPlanner:
         subgoal = goal
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
+        if self.spacetime is not None:
+            subgoal = self.spacetime.subgoal(state[:2], subgoal, prediction, obstacles)
         if self.lanes is not None and np.array_equal(subgoal, goal):
             subgoal = self.lanes.subgoal(state[:2], goal, prediction, obstacles)
         return subgoal

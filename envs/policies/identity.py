@@ -50,8 +50,17 @@ def artifact_digest(cfg: PolicyConfig) -> str | None:
     return h.hexdigest()[:16]
 
 
+# MPCConfig fields added after records existed, with their defaults: left out of the fingerprint while at the
+# default, so that records made before a field existed still match a config that does not use it
+LATER_MPC_FIELDS: dict[str, Any] = {"spacetime": None}
+
+
 def policy_identity(cfg: PolicyConfig) -> list[Any]:
-    """What identifies a policy in an episode fingerprint: its config (JSON) and, when it loads weight files,
-    their digest (left out otherwise, so the fingerprints of such policies are those made before digests)."""
+    """What identifies a policy in an episode fingerprint: its config (JSON, without the `LATER_MPC_FIELDS` at
+    their defaults) and, when it loads weight files, their digest (left out otherwise, so the fingerprints of such
+    policies are those made before digests)."""
+    conf = cfg.to_json()
+    if isinstance(conf.get("mpc"), dict):
+        conf["mpc"] = {k: v for k, v in conf["mpc"].items() if k not in LATER_MPC_FIELDS or v != LATER_MPC_FIELDS[k]}
     digest = artifact_digest(cfg)
-    return [cfg.to_json()] if digest is None else [cfg.to_json(), digest]
+    return [conf] if digest is None else [conf, digest]

@@ -311,3 +311,15 @@ def test_an_episode_recorded_as_an_error_is_retried_on_resume_and_the_exit_says_
     assert again["run"]["episodes_run"] == 1 and again["run"]["errors"] == 0
     assert _untimed(again) == _untimed(first)  # its result replaced the error: the same leaderboard as before
     assert merge_records([[failed], [victim]]) == [victim] and merge_records([[victim], [failed]]) == [victim]
+
+
+def test_an_mpc_field_added_later_stays_out_of_the_fingerprint_at_its_default():
+    """Records made before `MPCConfig.spacetime` existed still resume: at its default the field is not fingerprinted;
+    set, it is."""
+    from envs.policies.identity import policy_identity
+    from planner import SpaceTimeConfig
+
+    plain = policy_identity(PolicyConfig("mpc-cv"))[0]["mpc"]
+    assert "spacetime" not in plain and "lane" in plain  # lane predates the v7 records: it stays
+    searched = policy_identity(PolicyConfig("mpc-cv", mpc=replace(ENV_MPC, spacetime=SpaceTimeConfig())))[0]["mpc"]
+    assert searched["spacetime"] is not None
