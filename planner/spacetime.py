@@ -20,7 +20,7 @@ opens later, or by waiting. `SpaceTimeSearch.subgoal` looks for it:
    into the gap, or a place to wait).
 5. No free cell after the first step: the goal (the MPC and the shield handle it).
 
-Units: metres, seconds. Pure numpy and scipy; stateless.
+Units: metres, seconds. Pure numpy and scipy (imported on first use); stateless.
 """
 
 from __future__ import annotations
@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from planner.config import SpaceTimeConfig
 from planner.prediction import PedPrediction, current_positions
@@ -49,6 +48,8 @@ class SpaceTimeSearch:
     def subgoal(self, position: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
                 walls: np.ndarray | None) -> np.ndarray:
         """The point (2,) m to head for from position (2,) towards goal (2,), or the goal itself."""
+        from scipy.ndimage import distance_transform_edt  # lazily: `import planner` stays numpy and casadi only
+
         cfg = self.config
         position, goal = np.asarray(position, float), np.asarray(goal, float)
         if prediction is None or not np.any(prediction.mask):
