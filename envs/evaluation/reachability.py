@@ -41,6 +41,7 @@ from envs.env import CrowdNavEnv
 
 VERDICTS = ("infeasible", "feasible", "open")
 DEFAULT_CHECK_S = 0.2  # the optimistic set's check period by default: the smallest multiple of the env step >= this
+MIN_STEP_S = 0.1  # the conservative set steps at least this long (whole env steps): finer env steps are strided
 
 
 @dataclass(frozen=True)
@@ -254,45 +255,69 @@ def _blocked_opt(course: Course, grid: _Grid, k: int) -> np.ndarray:
     return grid.blocked(course.ped_pos[k][keep], clear)
 
 
-def _swept_margin(course: Course) -> float:
-    """Extra clearance (m) at both ends of a step that keeps the closest approach of the two straight motions over
-    the step at least the contact distance: sqrt(R^2 + (L / 2)^2) - R, L the most the pair can move apart-wise in
-    one step (the robot's max_speed * dt plus the fastest pedestrian step), R the smallest contact distance."""
-    step = 0.0
+def _swept_margin(course: Course, stride: int = 1) -> float:
+    """Extra clearance (m) at both ends of a conservative step of `stride` env steps that keeps every contact test
+    the env makes in between passing. stride 1: the closest approach of the two straight motions over the step stays
+    at least the contact distance when both ends keep sqrt(R^2 + (L / 2)^2) - R more, L the most the pair can move
+    apart-wise in one step (the robot's max_speed * dt plus the fastest pedestrian step) and R the smallest contact
+    distance. stride > 1 (people walk polylines in between): L itself, the robot's straight move plus the longest
+    pedestrian path over the stride (by the triangle inequality)."""
+    steps = []
     for k in range(course.n_steps):
         _, i, j = np.intersect1d(course.ped_id[k], course.ped_id[k + 1], return_indices=True)
-        if len(i):
-            step = max(step, float(np.max(np.hypot(*(course.ped_pos[k + 1][j] - course.ped_pos[k][i]).T))))
+        steps.append(float(np.max(np.hypot(*(course.ped_pos[k + 1][j] - course.ped_pos[k][i]).T))) if len(i) else 0.0)
     radii = [r for r in course.ped_radius if len(r)]
     if not radii:
         return 0.0
+    if stride > 1:
+        path = max((sum(steps[k:k + stride]) for k in range(0, len(steps), stride)), default=0.0)
+        return course.max_speed_mps * course.dt_s * stride + path
     contact = float(np.min(np.concatenate(radii))) + course.robot_radius_m
-    half = 0.5 * (course.max_speed_mps * course.dt_s + step)
+    half = 0.5 * (course.max_speed_mps * course.dt_s + max(steps, default=0.0))
     return math.sqrt(contact * contact + half * half) - contact
+
+
+def stride_of(dt_s: float) -> int:
+    """Env steps per conservative step: 1 from MIN_STEP_S up, more for finer env steps (CrowdNav++'s 0.05 s)."""
+    return max(1, int(round(MIN_STEP_S / dt_s)))
 
 
 def _conservative(course: Course, grid: _Grid, keep: bool, speed_mps: float | None = None,
                   extra_m: float = 0.0) -> tuple[float | None, np.ndarray | None]:
     """First time (s) the conservative set is at the goal (None: not before the time limit) and, if `keep`, a
-    witness path (k + 1, 2) m of grid centres, one per env step from the start (module docstring). speed_mps: the
-    witness's top speed (default the robot's); extra_m: clearance kept beyond the contact test, m."""
+    witness path (k + 1, 2) m, one point per env step from the start (grid centres every `stride_of(dt)` steps,
+    straight lines between; module docstring). speed_mps: the witness's top speed (default the robot's); extra_m:
+    clearance kept beyond the contact test, m."""
     speed = course.max_speed_mps if speed_mps is None else speed_mps
-    h, margin, step_m = grid.h, _swept_margin(course) + extra_m, speed * course.dt_s
+    stride = stride_of(course.dt_s)
+    h, margin, step_m = grid.h, _swept_margin(course, stride) + extra_m, speed * course.dt_s * stride
     free_wall = grid.wall_dist >= course.robot_radius_m + extra_m + 1e-6
     at_goal = grid.goal_dist < course.goal_tolerance_m
     reach = np.zeros(grid.shape, bool)
     reach[grid.start] = True
     history = [reach]
-    for k in range(1, course.n_steps + 1):
+    for k in range(stride, course.n_steps + 1, stride):
         clear = course.ped_radius[k] + course.robot_radius_m + margin
         reach = _dilate(reach, step_m, h) & free_wall & ~grid.blocked(course.ped_pos[k], clear)
         if keep:
             history.append(reach)
         if np.any(reach & at_goal):
-            return k * course.dt_s, (_backtrack(grid, history, reach & at_goal, step_m) if keep else None)
+            if not keep:
+                return k * course.dt_s, None
+            corners = _backtrack(grid, history, reach & at_goal, step_m)
+            return k * course.dt_s, _fill(corners, stride)
         if not reach.any():
             break
     return None, None
+
+
+def _fill(corners: np.ndarray, stride: int) -> np.ndarray:
+    """(n + 1, 2) points a stride apart -> (n * stride + 1, 2), straight lines between."""
+    if stride == 1:
+        return corners
+    w = (np.arange(stride) / stride)[None, :, None]
+    inner = corners[:-1, None] * (1 - w) + corners[1:, None] * w  # (n, stride, 2)
+    return np.concatenate([inner.reshape(-1, 2), corners[-1:]])
 
 
 def _backtrack(grid: _Grid, history: list[np.ndarray], end: np.ndarray, step_m: float) -> np.ndarray:
@@ -315,8 +340,7 @@ def reach(course: Course, config: ReachConfig | None = None, witness_path: bool 
     set's path (one grid centre per env step) when it found one."""
     cfg = config or ReachConfig()
     every = cfg.steps_per_check(course.dt_s)
-    h = course.max_speed_mps * course.dt_s / cfg.cells_per_step
-    grid = _Grid(course, h, margin_m=course.robot_radius_m + 4 * h + course.max_speed_mps * course.dt_s * every)
+    grid = _grid_for(course, cfg, every)
     earliest = _optimistic(course, grid, every)
     witness, path = _conservative(course, grid, witness_path) if earliest is not None else (None, None)
     verdict = "infeasible" if earliest is None else "feasible" if witness is not None else "open"
@@ -329,7 +353,11 @@ def roomy_path(course: Course, config: ReachConfig | None = None, speed_fraction
     top speed) that keeps extra_m more clearance from people and walls: room for a robot with acceleration and
     turn-rate limits to track it (`envs.evaluation.witness`). None where there is none before the time limit."""
     cfg = config or ReachConfig()
-    every = cfg.steps_per_check(course.dt_s)
-    h = course.max_speed_mps * course.dt_s / cfg.cells_per_step
-    grid = _Grid(course, h, margin_m=course.robot_radius_m + 4 * h + course.max_speed_mps * course.dt_s * every)
+    grid = _grid_for(course, cfg, cfg.steps_per_check(course.dt_s))
     return _conservative(course, grid, True, speed_fraction * course.max_speed_mps, extra_m)[1]
+
+
+def _grid_for(course: Course, cfg: ReachConfig, every: int) -> _Grid:
+    """The grid of a course: cell side = the robot's longest conservative step / cells_per_step."""
+    h = course.max_speed_mps * course.dt_s * stride_of(course.dt_s) / cfg.cells_per_step
+    return _Grid(course, h, margin_m=course.robot_radius_m + 4 * h + course.max_speed_mps * course.dt_s * every)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -132,3 +134,27 @@ def test_the_default_check_period_follows_the_env_step() -> None:
     assert ReachConfig().resolved(0.25).optimistic_dt_s == pytest.approx(0.25)  # CrowdNav's step
     with pytest.raises(ValueError, match="whole multiple"):
         ReachConfig(optimistic_dt_s=0.3).resolved(0.25)
+
+
+@pytest.mark.slow
+def test_a_fine_env_step_is_strided_and_the_witness_still_holds_in_the_env() -> None:
+    """CrowdNav++'s 0.05 s step: the conservative set steps 0.1 s at a time; its path, one point per env step, driven
+    in the env by the holonomic robot of that setting, reaches the goal without contact."""
+    from envs.evaluation.reachability import stride_of
+    from envs.evaluation.suite import load_suite
+
+    assert stride_of(0.05) == 2 and stride_of(0.1) == 1 and stride_of(0.25) == 1
+    cell = load_suite("crowdnav-plusplus").cells[0]
+    cfg = replace(cell.env_config(0), time_limit_s=25.0)
+    course = course_of(cfg, 0)
+    r = reach(course, witness_path=True)
+    assert cfg.dt_s == 0.05 and r.verdict == "feasible" and len(r.path) == round(r.witness_arrival_s / 0.05) + 1
+    assert np.max(np.hypot(*np.diff(r.path, axis=0).T)) <= cfg.robot.max_speed_mps * 0.05 + 1e-9
+    env = CrowdNavEnv(cfg)
+    env.reset(seed=0)
+    done, info, k = False, {}, 0
+    while not done:
+        k += 1
+        _, _, terminated, truncated, info = env.step_control((r.path[k] - env.robot_state[:2]) / cfg.dt_s)
+        done = terminated or truncated
+    assert info["episode_metrics"]["success"] and not info["episode_metrics"]["collision"]
