@@ -15,13 +15,14 @@ sets stepped forward in time from the robot's start (`reach`):
   robot at that speed could have succeeded**: the episode is "infeasible", whatever the planner. Its first
   arrival is a lower bound on any robot's time to goal.
 - **conservative** (a witness): a holonomic robot moving from grid centre to grid centre at most
-  `max_speed * dt_s` per env step, keeping at every step the clearance that makes the env's swept contact test
-  (closest approach of the two straight motions over the step) pass, and the env's wall test. If it reaches
+  `max_speed * dt_s` per env step (env steps finer than MIN_STEP_S are strided: a straight move over several steps),
+  keeping at every step the clearance that makes the env's swept contact test (closest approach of the two straight
+  motions over the step) pass, and the env's wall test. If it reaches
   the goal, a contact-free path exists for a holonomic robot at that speed: the episode is "feasible". The
   benchmark's robot is a unicycle with acceleration limits, so a feasible episode may still be out of its reach.
 - otherwise "open": neither bound decides.
 
-Units: m, s. Grid: square cells of side h = `max_speed * dt_s / cells_per_step`, one centre exactly at the
+Units: m, s. Grid: square cells of side h = the conservative step at full speed / `cells_per_step`, one centre at the
 robot's start. The grid covers the scene, every pedestrian and the goal with a margin; outside it nothing
 stands, and any path leaving it can be projected back onto its border (projection onto a box is 1-Lipschitz),
 so the bounds hold for paths anywhere.
