@@ -303,6 +303,10 @@ def _bounds(args: argparse.Namespace) -> int:
     run = summary["run"]
     print(f"\n{run['episodes_run']} episodes computed, {run['episodes_resumed']} already there, "
           f"{run['wall_time_s']:.0f} s; wrote {args.out}/{BOUNDS} and bounds.md")
+    if run["died"]:
+        print(f"crowdnav: {len(run['died'])} episodes not computed, their worker died ({run['died'][0]}); rerun the "
+              "same command to compute them", file=sys.stderr)
+        return 1
     return 0
 
 

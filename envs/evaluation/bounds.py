@@ -135,7 +135,8 @@ def plan_bounds(suite: Suite, cells: Sequence[Cell], done: dict[tuple[str, int],
 def run_bounds(suite: Suite, cells: Sequence[Cell], out: str | Path, *, config: ReachConfig | None = None,
                data: Path = DEFAULT_DATA, workers: int = 1, progress: bool = True) -> dict[str, Any]:
     """Compute what is missing, then write `<out>/bounds.md`. Returns the summary (`bounds_summary`) with
-    `skipped` (cells whose crowd sees the robot) and `run` (episodes computed / resumed, wall time)."""
+    `skipped` (cells whose crowd sees the robot) and `run` (episodes computed / resumed, wall time, and `died`: the
+    episodes whose worker process died twice, left out of the file so that a rerun computes them)."""
     from tqdm.auto import tqdm
 
     from crowdsim.distributed import WorkerDied, process_context, run_in_processes
@@ -152,19 +153,21 @@ def run_bounds(suite: Suite, cells: Sequence[Cell], out: str | Path, *, config: 
     else:
         results = run_in_processes(run_bound_task, todo, min(workers, len(todo)),
                                    process_context(["envs.evaluation.bounds"]))
+    died = []
     with tqdm(total=len(todo), desc=f"{suite.name} bounds", unit="ep", disable=not progress) as bar, \
             closing(results) as res:
         for i, line in res:
-            if isinstance(line, WorkerDied):
-                raise RuntimeError(f"{todo[i].cell}/seed {todo[i].seed}: {line}")
-            append_line(path, json.dumps(line, allow_nan=False, separators=(",", ":")))
+            if isinstance(line, WorkerDied):  # not written: a rerun of the same command computes it again
+                died.append(f"{todo[i].cell}/seed {todo[i].seed}: {line}")
+            else:
+                append_line(path, json.dumps(line, allow_nan=False, separators=(",", ":")))
             bar.update(1)
     wanted = {(c.name, s) for c in cells if c.name not in skipped for s in c.seeds}
     lines = {k: v for k, v in read_bounds(path).items() if k in wanted}
     summary = bounds_summary(suite, cells, lines)
     summary["skipped"] = skipped
-    summary["run"] = {"episodes_run": len(todo), "episodes_resumed": len(wanted) - len(todo),
-                      "wall_time_s": time.perf_counter() - start}
+    summary["run"] = {"episodes_run": len(todo) - len(died), "episodes_resumed": len(wanted) - len(todo),
+                      "wall_time_s": time.perf_counter() - start, "died": died}
     write_text_atomic(out / "bounds.md", "\n".join(bounds_table(summary)) + "\n")
     return summary
 

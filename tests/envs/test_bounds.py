@@ -84,3 +84,22 @@ def test_a_feasible_episode_is_tried_with_the_benchmark_robot(tmp_path):
     assert {line["verdict"] for line in lines.values()} == {"feasible"}  # 3 people in a 12 m circle, 20 s
     assert {line["robot_witness"] for line in lines.values()} == {"success"}
     assert summary["cells"]["circle-short"]["robot_floor"] == 1.0
+
+
+def test_an_episode_whose_worker_died_is_left_for_the_rerun(tmp_path, monkeypatch):
+    import crowdsim.distributed as dist
+
+    def flaky(fn, jobs, workers, ctx=None):
+        yield 0, dist.WorkerDied("killed by signal 9 (SIGKILL)")
+        for i, job in enumerate(jobs[1:], start=1):
+            yield i, fn(job)
+
+    monkeypatch.setattr(dist, "run_in_processes", flaky)
+    suite = parse_suite(SUITE)
+    cells = suite.select(["circle-short"])
+    first = run_bounds(suite, cells, tmp_path, workers=2, progress=False)
+    assert first["run"]["episodes_run"] == 1 and len(first["run"]["died"]) == 1
+    assert len(read_bounds(tmp_path / BOUNDS)) == 1
+    monkeypatch.setattr(dist, "run_in_processes", lambda fn, jobs, w, ctx=None: enumerate(map(fn, jobs)))
+    again = run_bounds(suite, cells, tmp_path, workers=2, progress=False)
+    assert again["run"]["episodes_run"] == 1 and len(read_bounds(tmp_path / BOUNDS)) == 2
