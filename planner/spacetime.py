@@ -121,19 +121,27 @@ def _tracks(prediction: PedPrediction, step_s: float, n_steps: int) -> tuple[np.
 
 
 def _blocked(xy: np.ndarray, tracks: np.ndarray, clear: np.ndarray) -> np.ndarray:
-    """(T, G, G) bool: at each of the T rows of tracks (T, S, 2), the cell centres closer than clear[t, i] to person
-    i; one stencil for all, vectorised."""
-    out = np.zeros((len(tracks), *xy.shape[:2]), bool)
-    if tracks.shape[1] == 0:
+    """(T, G, G) bool: at each of the T rows of tracks (T, S, 2), the cells of grid xy (G, G, 2) whose centre is
+    closer than clear[t, i] to person i."""
+    return disc_cells(xy[0, 0], float(xy[1, 0, 0] - xy[0, 0, 0]), xy.shape[:2], tracks, clear)
+
+
+def disc_cells(origin: np.ndarray, h: float, shape: tuple[int, int], centres: np.ndarray,
+               clear: np.ndarray) -> np.ndarray:
+    """(..., nx, ny) bool: the cells of the grid with centres origin + (i, j) h (m) whose centre is closer than
+    clear[..., s] (m) to centres[..., s, :] (..., S, 2) m; one stencil for all discs, vectorised."""
+    centres, clear = np.asarray(centres, float), np.asarray(clear, float)
+    lead = centres.shape[:-2]
+    out = np.zeros((*lead, *shape), bool)
+    if centres.shape[-2] == 0 or float(clear.max()) <= 0:
         return out
-    h, origin = xy[1, 0, 0] - xy[0, 0, 0], xy[0, 0]
     k = int(math.ceil(float(clear.max()) / h)) + 1
     r = np.arange(-k, k + 1)
     stencil = np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)  # (M, 2)
-    idx = np.floor((tracks - origin) / h).astype(int)[..., None, :] + stencil  # (T, S, M, 2)
-    gap = origin + idx * h - tracks[..., None, :]
-    hit = (gap[..., 0] ** 2 + gap[..., 1] ** 2 < (clear ** 2)[:, :, None]) & np.all(idx >= 0, axis=-1) \
-        & np.all(idx < np.array(xy.shape[:2]), axis=-1)
-    t = np.broadcast_to(np.arange(len(tracks))[:, None, None], hit.shape)
-    out[t[hit], idx[hit][:, 0], idx[hit][:, 1]] = True
+    idx = np.floor((centres - origin) / h).astype(int)[..., None, :] + stencil  # (..., S, M, 2)
+    gap = origin + idx * h - centres[..., None, :]
+    hit = (np.hypot(gap[..., 0], gap[..., 1]) < clear[..., None]) & np.all(idx >= 0, axis=-1) \
+        & np.all(idx < np.array(shape), axis=-1)
+    where = np.nonzero(hit)
+    out[(*where[:-2], idx[hit][:, 0], idx[hit][:, 1])] = True
     return out

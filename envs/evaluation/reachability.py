@@ -39,6 +39,7 @@ from scipy.ndimage import distance_transform_edt
 from envs.collisions import SPAWN_WINDOW_S
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.env import CrowdNavEnv
+from planner import point_segment_distances
 
 VERDICTS = ("infeasible", "feasible", "open")
 DEFAULT_CHECK_S = 0.2  # the optimistic set's check period by default: the smallest multiple of the env step >= this
@@ -177,14 +178,13 @@ class _Grid:
         self.xy = np.stack([self.x0[0] + ii * h, self.x0[1] + jj * h], axis=-1)  # (nx, ny, 2) centres, m
         self.goal_dist = np.hypot(*(self.xy - course.goal).transpose(2, 0, 1))
         if len(course.walls):
-            flat = self.xy.reshape(-1, 2)
-            segs = course.walls.reshape(-1, 4)
-            self.wall_dist = np.min([_seg_dist(flat, s) for s in segs], axis=0).reshape(self.shape)
+            self.wall_dist = point_segment_distances(self.xy, course.walls.reshape(-1, 4)).min(axis=-1)
         else:
             self.wall_dist = np.full(self.shape, np.inf)
 
     def blocked(self, pos: np.ndarray, clear: np.ndarray) -> np.ndarray:
-        """(nx, ny) bool: centres closer than clear[i] m to pedestrian i at pos[i] (n, 2)."""
+        """(nx, ny) bool: centres closer than clear[i] m to pedestrian i at pos[i] (n, 2). One slice per disc: on
+        this fine grid that is ~10x faster than the batched stencil of `planner.spacetime.disc_cells` (same cells)."""
         out = np.zeros(self.shape, bool)
         h = self.h
         for p, c in zip(pos, clear, strict=True):
@@ -197,15 +197,6 @@ class _Grid:
             sub = self.xy[lo[0]:hi[0], lo[1]:hi[1]]
             out[lo[0]:hi[0], lo[1]:hi[1]] |= np.hypot(sub[..., 0] - p[0], sub[..., 1] - p[1]) < c
         return out
-
-
-def _seg_dist(xy: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """Distances (M,) m from points xy (M, 2) to the segment seg (4,) = (x1, y1, x2, y2)."""
-    a, b = seg[:2], seg[2:]
-    e = b - a
-    ee = float(e @ e)
-    t = np.zeros(len(xy)) if ee == 0.0 else np.clip((xy - a) @ e / ee, 0.0, 1.0)
-    return np.hypot(*(xy - a - t[:, None] * e).T)
 
 
 def _distance(mask: np.ndarray, radius_m: float, h: float) -> np.ndarray:
