@@ -66,22 +66,21 @@ class SpaceTimeSearch:
             + np.minimum(cfg.max_inflation_m, cfg.spread_inflation * spread)  # (n_steps + 1, n)
         near = np.any(np.all(np.abs(tracks - position) <= half + clear[..., None], axis=-1), axis=0)
         tracks, clear = tracks[:, near], clear[:, near]  # only the people who ever enter the grid
-        reach = np.zeros(xy.shape[:2], bool)
-        reach[k, k] = True
-        alive, last = reach, 0
+        start = np.zeros(xy.shape[:2], bool)
+        start[k, k] = True
         step_m = self.speed_mps * cfg.step_s
         goal_d = np.hypot(*(xy - goal).transpose(2, 0, 1))
         blocked = _blocked(xy, tracks, clear)
-        sets = [reach]
+        sets = [start]  # sets[j]: the cells reachable at j step_s, while the set lives
         for j in range(1, n_steps + 1):
-            grown = distance_transform_edt(~alive, sampling=cfg.cell_m) <= step_m + 1e-9
+            grown = distance_transform_edt(~sets[-1], sampling=cfg.cell_m) <= step_m + 1e-9
             alive = grown & free_walls & ~blocked[j]
             if not alive.any():
                 break
             if np.any(alive & (goal_d < cfg.goal_reach_m)):
                 return goal
-            reach, last = alive, j
             sets.append(alive)
+        last, reach = len(sets) - 1, sets[-1]
         if last == 0:
             return goal
         dist = float(np.hypot(*(goal - position)))
@@ -91,16 +90,28 @@ class SpaceTimeSearch:
             return goal  # the straight run is open to the horizon (within a step): leave the pull as it is
         cell = np.unravel_index(np.argmin(np.where(reach, goal_d, np.inf)), reach.shape)
         lead = min(last, max(1, int(round(cfg.lead_s / cfg.step_s))))
-        for mask in sets[last - 1:lead - 1:-1]:  # back along one path to the set `lead` steps ahead
-            cand = np.argwhere(mask)
-            cell = tuple(cand[np.argmin(np.hypot(*(cand - np.array(cell)).T))])
-        return xy[cell]
+        path = trace_back(sets[lead:], cell, int(math.ceil(step_m / cfg.cell_m)) + 1)  # to the set `lead` ahead
+        return xy[path[0]]
 
     def _free_of_walls(self, xy: np.ndarray, walls: np.ndarray | None) -> np.ndarray:
         if walls is None or len(walls) == 0:
             return np.ones(xy.shape[:2], bool)
         d = point_segment_distances(xy, np.asarray(walls, float).reshape(-1, 4)).min(axis=-1)
         return d >= self.robot_radius_m + self.wall_clearance_m
+
+
+def trace_back(sets: list[np.ndarray], end: tuple[int, ...], pad: int) -> list[tuple[int, ...]]:
+    """One path of grid cells back through reachable sets: `end` (a cell of sets[-1]), then for each set before it
+    the nearest of its cells within `pad` cells (the set grew by less than that per step, so one is there).
+    Returns the cells in forward order, sets[0]'s first."""
+    cell = tuple(int(c) for c in end)
+    path = [cell]
+    for mask in sets[-2::-1]:
+        lo = np.maximum(np.array(cell) - pad, 0)
+        cand = np.argwhere(mask[lo[0]:cell[0] + pad + 1, lo[1]:cell[1] + pad + 1]) + lo
+        cell = tuple(int(c) for c in cand[np.argmin(np.hypot(*(cand - np.array(cell)).T))])
+        path.append(cell)
+    return path[::-1]
 
 
 def _tracks(prediction: PedPrediction, step_s: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:

@@ -40,6 +40,7 @@ from envs.collisions import SPAWN_WINDOW_S
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.env import CrowdNavEnv
 from planner import point_segment_distances
+from planner.spacetime import trace_back
 
 VERDICTS = ("infeasible", "feasible", "open")
 DEFAULT_CHECK_S = 0.2  # the optimistic set's check period by default: the smallest multiple of the env step >= this
@@ -140,20 +141,21 @@ def course_of(config: CrowdNavConfig, seed: int) -> Course:
     age = getattr(crowd, "track_age_s", None)
     first_seen: dict[int, int] = {}
     pos, rad, pid, fresh = [], [], [], []
-    state = env._state
     for k in range(cfg.max_steps + 1):
         if k:
             state = crowd.step()
-        act = state.active
-        ids = state.ped_id[act]
+            now_pos, now_rad, ids = state.pos[state.active], state.radius[state.active], state.ped_id[state.active]
+        else:
+            p = env.pedestrians()
+            now_pos, now_rad, ids = p.pos, p.radius, p.ped_id
         for i in ids:
             first_seen.setdefault(int(i), k if k else -10**9)
         if age is not None:
             f = np.array([age(int(i)) < SPAWN_WINDOW_S - 1e-9 for i in ids], bool)
         else:
             f = np.array([(k - first_seen[int(i)]) * dt < SPAWN_WINDOW_S - 1e-9 for i in ids], bool)
-        pos.append(state.pos[act].copy())
-        rad.append(state.radius[act].copy())
+        pos.append(now_pos.copy())
+        rad.append(now_rad.copy())
         pid.append(ids.copy())
         fresh.append(f)
     return Course(env.robot_state[:2].copy(), env.goal.copy(), cfg.goal_tolerance_m, cfg.robot.radius_m,
@@ -296,8 +298,8 @@ def _conservative(course: Course, grid: _Grid, keep: bool, speed_mps: float | No
         if np.any(reach & at_goal):
             if not keep:
                 return k * course.dt_s, None
-            corners = _backtrack(grid, history, reach & at_goal, step_m)
-            return k * course.dt_s, _fill(corners, stride)
+            cells = trace_back(history, tuple(np.argwhere(reach & at_goal)[0]), int(math.ceil(step_m / h)) + 1)
+            return k * course.dt_s, _fill(np.array([grid.xy[c] for c in cells]), stride)
         if not reach.any():
             break
     return None, None
@@ -310,21 +312,6 @@ def _fill(corners: np.ndarray, stride: int) -> np.ndarray:
     w = (np.arange(stride) / stride)[None, :, None]
     inner = corners[:-1, None] * (1 - w) + corners[1:, None] * w  # (n, stride, 2)
     return np.concatenate([inner.reshape(-1, 2), corners[-1:]])
-
-
-def _backtrack(grid: _Grid, history: list[np.ndarray], end: np.ndarray, step_m: float) -> np.ndarray:
-    """Cell centres (len(history), 2) m of one path through the stored sets, ending in `end`, each within step_m of
-    the one before."""
-    cell = tuple(np.argwhere(end)[0])
-    path = [cell]
-    pad = int(math.ceil(step_m / grid.h)) + 1
-    for mask in history[-2::-1]:
-        lo = np.maximum(np.array(cell) - pad, 0)
-        cand = np.argwhere(mask[lo[0]:cell[0] + pad + 1, lo[1]:cell[1] + pad + 1]) + lo
-        d = np.hypot(*(cand - np.array(cell)).T) * grid.h
-        cell = tuple(cand[np.argmin(np.where(d <= step_m + 1e-9, d, np.inf))])
-        path.append(cell)
-    return np.array([grid.xy[c] for c in path[::-1]])
 
 
 def reach(course: Course, config: ReachConfig | None = None, witness_path: bool = False) -> ReachResult:
