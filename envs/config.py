@@ -69,6 +69,9 @@ class ObservationConfig:
 
     max_pedestrians: P, the nearest P pedestrians within `sensor_range_m` are observed, the rest padded.
     sensor_range_m: pedestrians farther than this from the robot are not observed, m.
+    sensor_gap_m: pedestrians whose surface gap from the robot (centre distance minus both radii) is larger than this
+        are hidden from every policy: the observation and the planners' `PolicyView` (pedestrians, history,
+        future). CrowdNav++'s robot sensor_range (5 m); inf (default): nobody is hidden by it, m.
     position_bound_m: Box bound on every relative position; values are clipped to it, m.
     speed_bound_mps: Box bound on velocities, m/s.
     group_source: "truth" (the simulator's labels) or "predicted" (the predictor's assignment).
@@ -82,6 +85,7 @@ class ObservationConfig:
 
     max_pedestrians: int = 20
     sensor_range_m: float = 10.0
+    sensor_gap_m: float = math.inf
     position_bound_m: float = 40.0
     speed_bound_mps: float = 5.0
     group_source: str = "truth"
@@ -99,6 +103,8 @@ class ObservationConfig:
         if self.n_prediction_samples < 1:
             raise ValueError(f"n_prediction_samples must be >= 1, got {self.n_prediction_samples}")
         _positive(self, ("sensor_range_m", "position_bound_m", "speed_bound_mps", "wall_range_m"))
+        if not (isinstance(self.sensor_gap_m, int | float) and self.sensor_gap_m > 0):  # inf allowed
+            raise ValueError(f"sensor_gap_m must be > 0 (inf: nobody hidden), got {self.sensor_gap_m!r}")
         if self.group_source not in GROUP_SOURCES:
             raise ValueError(f"unknown group_source {self.group_source!r}; valid: {', '.join(GROUP_SOURCES)}")
 

@@ -214,7 +214,7 @@ class CrowdNavEnv(gym.Env):
         history window only when asked for; the pedestrians' true future only when asked for (reference policies)."""
         if not self._obs:
             raise RuntimeError("view() before reset()")
-        p = self.pedestrians()
+        p = self._sensed(self.pedestrians())
         ahead = None
         if future:
             if not hasattr(self.crowd, "future"):
@@ -222,21 +222,22 @@ class CrowdNavEnv(gym.Env):
             t = self.timing
             ahead = self.crowd.future(p.ped_id, t.step_s * np.arange(1, t.pred_len + 1))
         return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),
-                          self.config.robot, p, self.history_window() if history else None,
+                          self.config.robot, p, self.history_window(p) if history else None,
                           np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s, ahead)
 
     def action_for(self, decision: Decision) -> np.ndarray:
         """The action (2,) float32 a policy's decision asks for: its action, or the action of its control."""
         return decision.action if decision.action is not None else self.control_to_action(decision.control)
 
-    def history_window(self) -> np.ndarray:
+    def history_window(self, p: Pedestrians | None = None) -> np.ndarray:
         """(obs_len = 8, N, 2) m positions of `pedestrians()` 0.4 s apart, the last row being now. On a 0.4 s tick the
         rows are the recorded snapshots; between ticks each row is interpolated linearly between the two
         snapshots around its time (the newest interval ends at the current positions). For a pedestrian seen
         for less than 2.8 s, the rows before its first snapshot (or, if it came after the last tick, before now)
         run its velocity over its first 0.4 s in view backwards (`envs.history.extrapolate_back`): one who has
-        just come into view is seen walking, not standing (zero velocity only at the instant it appears)."""
-        p = self.pedestrians()
+        just come into view is seen walking, not standing (zero velocity only at the instant it appears). `p`: the
+        rows to give (default `pedestrians()`)."""
+        p = self.pedestrians() if p is None else p
         tick = self.config.ticks_per_prediction_step
         return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s)
 
@@ -331,6 +332,15 @@ class CrowdNavEnv(gym.Env):
         self._pred_samples, self._pred_groups = predict(self._predictor, self.history_window(), k, self._pred_rng,
                                                         self.timing.pred_len)
 
+    def _sensed(self, p: Pedestrians) -> Pedestrians:
+        """The rows of `p` within the sensor's surface gap (`ObservationConfig.sensor_gap_m`; all when it is inf)."""
+        gap = self.config.observation.sensor_gap_m
+        if not math.isfinite(gap) or len(p.pos) == 0:
+            return p
+        d = p.pos - self.robot_state[:2]
+        keep = np.sqrt((d * d).sum(-1)) - p.radius - self.config.robot.radius_m <= gap
+        return p if keep.all() else Pedestrians(*(a[keep] for a in (p.pos, p.vel, p.radius, p.group_id, p.ped_id)))
+
     def _observe(self) -> dict[str, np.ndarray]:
         cfg, p = self.config, self._peds()
         groups, samples = p.group_id, None
@@ -339,6 +349,10 @@ class CrowdNavEnv(gym.Env):
             samples = self._pred_samples
             if cfg.observation.group_source == "predicted":
                 groups = self._pred_groups
+        if math.isfinite(cfg.observation.sensor_gap_m):
+            seen = np.isin(p.ped_id, self._sensed(p).ped_id)
+            p, groups = self._sensed(p), groups[seen]
+            samples = None if samples is None else samples[:, :, seen]
         time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
                                  p.pos, p.vel, p.radius, groups, samples, self._walls.segments)

@@ -13,7 +13,8 @@ a replay cell with several files replays file (seed mod number of files) from a 
 `defaults` are `CrowdNavConfig` fields (time limit, ...) applied to every cell. Every policy meets exactly the same
 episodes. A simulated cell may also name its `crowd_model` ("social-force", the default, or "orca":
 `envs.crowd_models`), the ORCA humans' settings `orca` (`envs.orca_crowd.OrcaCrowdConfig` fields) and the robot's
-`robot` (`planner.RobotConfig` fields; default the env's unicycle); unknown names or fields raise naming the valid ones.
+`robot` (`planner.RobotConfig` fields; default the env's unicycle) and `observation` (`envs.config.ObservationConfig`
+fields, e.g. CrowdNav++'s 5 m sensor); unknown names or fields raise naming the valid ones.
 A suite may set `planner` defaults for the planner policies run in it: {"replan_every_steps": k, "mpc": {MPCConfig
 field: value}} (e.g. CrowdNav's 0.25 s decision period, and settings chosen on the suite's tuning twin); the command
 line's --replan-every and --mpc still override them, and every record holds the config it ran.
@@ -28,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdsim import GroupConfig
-from envs.config import REPLAY_SCENARIO, CrowdNavConfig
+from envs.config import REPLAY_SCENARIO, CrowdNavConfig, ObservationConfig
 from envs.orca_crowd import OrcaCrowdConfig
 from planner import CROWD_MPC, MPCConfig, RobotConfig
 from predictor.ethucy import DEFAULT_DATA_DIR
@@ -36,9 +37,10 @@ from predictor.ethucy import DEFAULT_DATA_DIR
 DEFAULT_DATA = DEFAULT_DATA_DIR  # predictor.ethucy owns the ETH/UCY data path (ETH_UCY_DIR overrides it)
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
               "episodes", "seed0", "note", "scene", "predictor", "groups", "group_overlaps", "crowd_model", "orca",
-              "robot"}
-_SIM_ONLY_KEYS = {"crowd_model", "orca", "robot"}  # simulated cells only
-_NESTED = {"orca": OrcaCrowdConfig, "robot": RobotConfig}  # cell key -> the frozen config its fields build
+              "robot", "observation"}
+_SIM_ONLY_KEYS = {"crowd_model", "orca", "robot", "observation"}  # simulated cells only
+# cell key -> the frozen config its fields build
+_NESTED = {"orca": OrcaCrowdConfig, "robot": RobotConfig, "observation": ObservationConfig}
 SIMULATED_SCENE = "synthetic"
 _DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m", "spawn_contact_ends_episode"}
 _PLANNER_KEYS = {"replan_every_steps", "mpc"}
