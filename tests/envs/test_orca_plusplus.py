@@ -169,3 +169,23 @@ def test_suite_plusplus_v2_holds_crowdnav_plusplus_settings():
     cfg = cell.env_config(cell.seeds[0])
     assert cfg.orca == LIVELY and cfg.observation.sensor_gap_m == 5.0
     assert (cfg.n_pedestrians, cfg.time_limit_s, cfg.robot, len(cell.seeds)) == (20, 50.0, HOLONOMIC, 500)
+
+
+def test_a_suite_cell_names_the_sensor_through_observation_fields_and_bad_ones_are_refused():
+    from envs.evaluation.suite import parse_suite
+
+    cell = {"name": "x", "scenario": "circle_crossing", "crowd_model": "orca", "n_pedestrians": 5,
+            "robot_visible": False, "episodes": 1, "seed0": 0}
+
+    def suite(observation: dict, base: dict = cell):
+        return parse_suite({"name": "s", "version": 1, "defaults": {"dt_s": 0.05},
+                            "cells": [{**base, "observation": observation}]})
+
+    assert suite({"sensor_gap_m": 5.0}).cells[0].env_config(0).observation.sensor_gap_m == 5.0
+    with pytest.raises(ValueError, match=r"unknown: \['sensor_m'\]; valid: .*sensor_gap_m"):
+        suite({"sensor_m": 5.0})
+    with pytest.raises(ValueError, match="sensor_gap_m"):
+        suite({"sensor_gap_m": -1})
+    replay = {"name": "r", "replay": ["zara1/test/crowds_zara01.txt"], "frame_step_s": 0.4, "episodes": 1, "seed0": 0}
+    with pytest.raises(ValueError, match="a replay cell takes no"):
+        suite({"sensor_gap_m": 5.0}, replay)
