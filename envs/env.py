@@ -334,12 +334,17 @@ class CrowdNavEnv(gym.Env):
 
     def _sensed(self, p: Pedestrians) -> Pedestrians:
         """The rows of `p` within the sensor's surface gap (`ObservationConfig.sensor_gap_m`; all when it is inf)."""
+        keep = self._sensor_mask(p)
+        return p if keep is None else Pedestrians(*(a[keep] for a in (p.pos, p.vel, p.radius, p.group_id, p.ped_id)))
+
+    def _sensor_mask(self, p: Pedestrians) -> np.ndarray | None:
+        """(N,) bool: the rows of `p` within the sensor's surface gap; None when every row is (or the gap is inf)."""
         gap = self.config.observation.sensor_gap_m
         if not math.isfinite(gap) or len(p.pos) == 0:
-            return p
+            return None
         d = p.pos - self.robot_state[:2]
         keep = np.sqrt((d * d).sum(-1)) - p.radius - self.config.robot.radius_m <= gap
-        return p if keep.all() else Pedestrians(*(a[keep] for a in (p.pos, p.vel, p.radius, p.group_id, p.ped_id)))
+        return None if keep.all() else keep
 
     def _observe(self) -> dict[str, np.ndarray]:
         cfg, p = self.config, self._peds()
@@ -349,10 +354,10 @@ class CrowdNavEnv(gym.Env):
             samples = self._pred_samples
             if cfg.observation.group_source == "predicted":
                 groups = self._pred_groups
-        if math.isfinite(cfg.observation.sensor_gap_m):
-            seen = np.isin(p.ped_id, self._sensed(p).ped_id)
-            p, groups = self._sensed(p), groups[seen]
-            samples = None if samples is None else samples[:, :, seen]
+        keep = self._sensor_mask(p)
+        if keep is not None:
+            p, groups = self._sensed(p), groups[keep]
+            samples = None if samples is None else samples[:, :, keep]
         time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
                                  p.pos, p.vel, p.radius, groups, samples, self._walls.segments)

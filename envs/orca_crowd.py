@@ -203,7 +203,7 @@ class OrcaCrowd:
         steps = np.rint(np.asarray(times_s, float) / self.dt_s).astype(np.int64)
         if np.any(steps < 1) or not np.allclose(steps * self.dt_s, times_s):
             raise ValueError(f"times_s must be positive whole multiples of dt_s = {self.dt_s}, got {times_s}")
-        fork = copy.copy(self)  # its arrays are replaced, never written in place
+        fork = copy.copy(self)  # shares the arrays: a change writes only into a fresh copy of them
         fork.rng = copy.deepcopy(self.rng)
         out = np.full((len(steps), len(ped_ids), 2), np.nan)
         want = {int(k): i for i, k in enumerate(steps)}
@@ -263,20 +263,20 @@ class OrcaCrowd:
 
     def _change_goals(self) -> None:
         """Each human, with chance goal_change_chance, takes a new goal (CrowdNav++ `update_human_goals_randomly`)."""
+        self.goal = self.goal.copy()  # a fresh array: a fork made by `future` keeps the old one
         for i in range(self.n):
             if self.rng.uniform() <= self.cfg.goal_change_chance:
-                goal = self.goal.copy()
-                goal[i] = self._clear_point(self.radius[i], self.v_pref[i], "centred", "goal", skip=i)
-                self.goal = goal
+                self.goal[i] = self._clear_point(self.radius[i], self.v_pref[i], "centred", "goal", skip=i)
 
     def _respawn_arrived(self) -> None:
         """Every human within its radius of its goal becomes a new one (CrowdNav++ `crowd_sim_pred.step`)."""
         arrived = np.flatnonzero(np.linalg.norm(self.goal - self.pos, axis=1) < self.radius)
+        if arrived.size:  # fresh arrays: a fork made by `future` keeps the old ones
+            self.pos, self.goal, self.vel = self.pos.copy(), self.goal.copy(), self.vel.copy()
+            self.radius, self.v_pref, self.ped_id = self.radius.copy(), self.v_pref.copy(), self.ped_id.copy()
         for i in arrived:
             r, v = self._attributes()
             p = self._clear_point(r, v, self.cfg.start_noise, "start", skip=i)
-            self.pos, self.goal, self.vel = self.pos.copy(), self.goal.copy(), self.vel.copy()
-            self.radius, self.v_pref, self.ped_id = self.radius.copy(), self.v_pref.copy(), self.ped_id.copy()
             self.pos[i], self.goal[i], self.vel[i] = p, -p, 0.0
             self.radius[i], self.v_pref[i] = r, v
             self.ped_id[i] = int(self.ped_id.max()) + 1
