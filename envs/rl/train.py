@@ -171,38 +171,76 @@ def check_demos(path: Path, cfg: TrainConfig) -> None:
 
 
 # ------------------------------------------------------------------------------------------ command line
+# Every TrainConfig flag with its type and what it does (`crowdnav train --help` prints these and the defaults).
+FLAG_HELP: dict[str, tuple[type, str]] = {
+    "max_pedestrians": (int, "pedestrian rows P in the observation (the nearest P; the rest unseen)"),
+    "wall_rays": (int, "range rays to the walls in the observation (0: none; an agent with rays needs them at "
+                       "evaluation)"),
+    "total_steps": (int, "agent steps (decisions) to train for, the warm start not counted"),
+    "seed": (int, "seed of PPO and of the training episodes (env i first resets with 10000000 + seed + i)"),
+    "envs": (int, "parallel envs in each roll-out"),
+    "workers": (int, "1: all envs in this process; = --envs: one subprocess per env (SB3's SubprocVecEnv)"),
+    "n_steps": (int, "roll-out length per env between PPO updates (decisions)"),
+    "batch_size": (int, "PPO minibatch size (decisions)"),
+    "n_epochs": (int, "PPO passes over each roll-out"),
+    "learning_rate": (float, "Adam learning rate of PPO"),
+    "gamma": (float, "discount per decision"),
+    "gae_lambda": (float, "GAE's lambda (advantage estimation)"),
+    "clip_range": (float, "PPO's clipping range of the probability ratio"),
+    "ent_coef": (float, "entropy bonus of PPO's loss"),
+    "target_kl": (float, "stop an update's epochs once the approximate KL passes 1.5x this (unset: never)"),
+    "log_std_init": (float, "initial log standard deviation of the Gaussian actions (also set after cloning)"),
+    "warm_start": (str, "none | bc (clone --demo-policy before PPO) | dagger (then --dagger-rounds of DAgger)"),
+    "demo_policy": (str, "the registry policy that demonstrates and labels (e.g. mpc-cv; a suite's planner "
+                         "defaults apply)"),
+    "demo_episodes": (int, "demonstration episodes for cloning (seeds --demo-seed onwards)"),
+    "demo_seed": (int, "first seed of the demonstration and DAgger episodes (never a suite's reported seed)"),
+    "bc_epochs": (int, "behaviour-cloning passes over the demonstrations, after each DAgger round too"),
+    "dagger_rounds": (int, "DAgger rounds: roll the learner out, label its states by the expert, clone again"),
+    "dagger_episodes": (int, "learner episodes per DAgger round"),
+    "eval_every_steps": (int, "decisions between selection evaluations (the learning curve; the best is kept)"),
+    "eval_episodes": (int, "selection episodes per evaluation (deterministic actions)"),
+    "eval_seed": (int, "first seed of the selection episodes (never a suite's reported seed)"),
+    "checkpoint_every_steps": (int, "decisions between resumable checkpoints (checkpoints/latest.zip)"),
+    "threads": (int, "torch threads in the learner process"),
+}
+BOOL_HELP: dict[str, str] = {
+    "groups": "the extractor pools each pedestrian row with its group's rows (group ids in the observation)",
+    "predictions": "predicted futures in the observation and the extractor (slower: the predictor runs every "
+                   "step)",
+}
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", type=Path, default=None, metavar="TOML", help="settings file (TrainConfig fields)")
+    p.add_argument("--config", type=Path, default=None, metavar="TOML",
+                   help="settings file (TOML of TrainConfig fields; flags override it)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="run folder (default out/train/<scenario or cell>)")
     p.add_argument("--resume", type=Path, default=None, metavar="DIR", help="resume the run in DIR")
-    p.add_argument("--demos", type=Path, default=None, metavar="NPZ", help="reuse demonstrations for --warm-start bc")
+    p.add_argument("--demos", type=Path, default=None, metavar="NPZ",
+                   help="reuse demonstrations (a demos.npz of an earlier run) for --warm-start bc or dagger")
     p.add_argument("--quick", action="store_true",
                    help="a short smoke run (about a minute on a laptop CPU; not a usable agent): "
                         + ", ".join(f"{k} {v}" for k, v in QUICK.items()) + "; other flags override these")
     add_setting_arguments(p)
-    for name, typ in {"scenario": str, "pedestrians": int, "time_limit_s": float}.items():
+    scenario_help = {"scenario": (str, "crowdsim scenario to train in, without --suite (crowdsim.scenarios)"),
+                     "pedestrians": (int, "pedestrians in the scenario, without --suite"),
+                     "time_limit_s": (float, "episode time limit (s), without --suite")}
+    for name, (typ, text) in scenario_help.items():
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=argparse.SUPPRESS, dest=name,
-                       help=f"without --suite (default: {SCENARIO_DEFAULTS[name]})")
-    flags = {"max_pedestrians": int, "wall_rays": int,
-             "total_steps": int, "seed": int, "envs": int, "workers": int, "n_steps": int, "batch_size": int,
-             "n_epochs": int, "learning_rate": float, "gamma": float, "ent_coef": float,
-             "target_kl": float, "log_std_init": float,
-             "warm_start": str, "demo_policy": str, "demo_episodes": int, "demo_seed": int, "bc_epochs": int,
-             "dagger_rounds": int, "dagger_episodes": int,
-             "eval_every_steps": int, "eval_episodes": int, "eval_seed": int, "checkpoint_every_steps": int,
-             "threads": int}
+                       help=f"{text} (default: {SCENARIO_DEFAULTS[name]})")
     defaults = TrainConfig()
-    for name, typ in flags.items():
+    for name, (typ, text) in FLAG_HELP.items():
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=argparse.SUPPRESS, dest=name,
-                       help=f"(default: {getattr(defaults, name)})")
+                       help=f"{text} (default: {getattr(defaults, name)})")
     p.add_argument("--steps", type=int, default=argparse.SUPPRESS, dest="total_steps",
                    help=f"total agent steps (decisions), alias of --total-steps (default: {defaults.total_steps})")
     p.add_argument("--invisible", action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, dest="invisible",
-                   help=f"without --suite (default: {SCENARIO_DEFAULTS['invisible']})")
-    for name in ("groups", "predictions"):
+                   help="pedestrians do not see the robot (CrowdNav's invisible setting), without --suite "
+                        f"(default: {SCENARIO_DEFAULTS['invisible']})")
+    for name, text in BOOL_HELP.items():
         p.add_argument(f"--{name}", action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, dest=name,
-                       help=f"(default: {getattr(defaults, name)})")
+                       help=f"{text} (default: {getattr(defaults, name)})")
     p.add_argument("--reward", action="append", default=None, metavar="TERM=WEIGHT",
                    help="reward weight override (repeatable): progress, success, collision, discomfort, "
                         "group_intrusion, time")

@@ -177,6 +177,27 @@ def test_train_resume_and_config_errors(tmp_path, capsys):
     assert cfg.scenario == "corridor" and cfg.pedestrians == 6 and cfg.env_config().rewards.collision == -20.0
 
 
+def test_every_setting_has_a_described_flag_that_reaches_the_config():
+    """`crowdnav train --help` describes every flag, and every TrainConfig field has one that sets it."""
+    import dataclasses
+
+    from crowdsim.cli import OneLineParser
+    from envs.rl.train import add_arguments, config_from_args
+
+    parser = OneLineParser()
+    add_arguments(parser)
+    actions = [a for a in parser._actions if a.option_strings and a.dest != "help"]
+    for a in actions:  # a text beyond the default's
+        text = (a.help or "").split("(default:")[0].strip()
+        assert len(text) > 15, f"{a.option_strings[0]} is not described: {a.help!r}"
+    dests = {a.dest for a in actions} | {"rewards"} - {"reward"}  # --reward TERM=WEIGHT sets rewards
+    fields = {f.name for f in dataclasses.fields(TrainConfig)}
+    assert fields - dests == set(), f"settings without a flag: {fields - dests}"
+    argv = ["--gae-lambda", "0.9", "--clip-range", "0.1", "--no-groups", "--reward", "time=-0.5"]
+    cfg, _, _ = config_from_args(parser.parse_args(argv))
+    assert (cfg.gae_lambda, cfg.clip_range, cfg.groups, cfg.rewards) == (0.9, 0.1, False, (("time", -0.5),))
+
+
 def test_readme_layout_table_matches_the_code():
     from pathlib import Path
 
