@@ -57,8 +57,11 @@ class TrainConfig:
     demo_episodes: int = 60
     demo_seed: int = 200_000
     bc_epochs: int = 30
+    bc_rotations: bool = False        # clone on scenes turned at random (holonomic robot, no walls; check_rotatable)
+    bc_detach_critic: bool = False    # cloning's return regression trains the critic's own layers only
     dagger_rounds: int = 3            # DAgger: roll the learner out, expert labels, clone again on the aggregate
     dagger_episodes: int = 30         # learner episodes per DAgger round
+    dagger_epochs: int | None = None  # cloning passes over the aggregate after each DAgger round (None: bc_epochs)
     eval_every_steps: int = 100_000
     eval_episodes: int = 30
     eval_seed: int = 100_000
@@ -73,6 +76,8 @@ class TrainConfig:
         for name in ints:
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        if self.dagger_epochs is not None and (not isinstance(self.dagger_epochs, int) or self.dagger_epochs < 1):
+            raise ValueError(f"dagger_epochs must be an integer >= 1 (or unset: bc_epochs), got {self.dagger_epochs!r}")
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
         if self.workers not in (1, self.envs):

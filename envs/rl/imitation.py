@@ -186,12 +186,71 @@ def concat(a: Demos, b: Demos) -> Demos:
                  np.concatenate([a.episode_seed, b.episode_seed]), a.decision_every_steps)
 
 
+# The world-frame (x, y) pairs of a holonomic robot's observation (its frame is world-aligned): the goal and the
+# velocity in `robot`, positions and velocities in `pedestrians`; every predicted point (last axis) in `predictions`.
+ROTATABLE: dict[str, tuple[tuple[int, int], ...]] = {"robot": ((0, 1), (3, 4)), "pedestrians": ((0, 1), (2, 3)),
+                                                     "predictions": ((0, 1),)}
+
+
+def check_rotatable(config: CrowdNavConfig) -> None:
+    """ValueError unless turning a whole scene of `config` about the robot is a symmetry of its decisions: a
+    holonomic robot (world-aligned observation and action), no wall rays and no walls (which stay where they are)."""
+    if config.robot.model != "holonomic":
+        raise ValueError(f"rotation augmentation needs the holonomic robot (world-aligned frame); this env's robot is "
+                         f"{config.robot.model}, whose observation is already in its own frame")
+    if config.observation.wall_rays:
+        raise ValueError("rotation augmentation does not turn wall rays; train without --wall-rays")
+    if len(np.asarray(CrowdNavEnv(config).crowd.walls).reshape(-1, 4)):
+        raise ValueError("rotation augmentation needs a scene without walls (the walls do not turn with the crowd)")
+
+
+def rotate_scene(obs: dict[str, Any], actions: Any, theta: Any) -> tuple[dict[str, Any], Any]:
+    """The same decisions in the scene turned by theta (B,) rad about a holonomic robot: obs {key: (B, ...)} and
+    actions (B, 2) (vx, vy over the top speed) as torch tensors; every pair in `ROTATABLE` turns, distances, radii,
+    masks and group ids stay (so does the nearest-first row order). A turned action keeps its length, so one inside
+    the unit disc stays inside the action box."""
+    import torch
+
+    c, s = torch.cos(theta), torch.sin(theta)
+    out = dict(obs)
+    for key, pairs in ROTATABLE.items():
+        if key not in obs:
+            continue
+        x, turned = obs[key], obs[key].clone()
+        shape = (-1,) + (1,) * (x.dim() - 2)
+        cb, sb = c.view(shape), s.view(shape)
+        for i, j in pairs:
+            turned[..., i] = cb * x[..., i] - sb * x[..., j]
+            turned[..., j] = sb * x[..., i] + cb * x[..., j]
+        out[key] = turned
+    a0, a1 = actions[:, 0], actions[:, 1]
+    return out, torch.stack([c * a0 - s * a1, s * a0 + c * a1], dim=-1).clamp(-1.0, 1.0)
+
+
+def _evaluate(policy: Any, obs: dict[str, Any], actions: Any, detach_critic: bool) -> tuple[Any, Any]:
+    """(values (B,), log-likelihood of actions (B,)) of an SB3 ActorCriticPolicy; with `detach_critic` the value
+    regression does not reach the features the actor shares."""
+    if not detach_critic:
+        values, log_prob, _ = policy.evaluate_actions(obs, actions)
+        return values.flatten(), log_prob
+    features = policy.extract_features(obs)
+    pi_f, vf_f = features if isinstance(features, tuple) else (features, features)
+    latent_pi = policy.mlp_extractor.forward_actor(pi_f)
+    latent_vf = policy.mlp_extractor.forward_critic(vf_f.detach())
+    log_prob = policy._get_action_dist_from_latent(latent_pi).log_prob(actions)
+    return policy.value_net(latent_vf).flatten(), log_prob
+
+
 def behaviour_clone(model: Any, demos: Demos, epochs: int = 30, batch_size: int = 256, lr: float = 1e-3,
-                    value_coef: float = 0.5, reset_log_std: float | None = -0.5, seed: int = 0) -> list[float]:
+                    value_coef: float = 0.5, reset_log_std: float | None = -0.5, seed: int = 0,
+                    rotations: bool = False, detach_critic: bool = False) -> list[float]:
     """Fit `model.policy` (an SB3 ActorCriticPolicy) to the demos; returns the mean loss per epoch.
 
-    Loss per batch: -mean log-likelihood of the expert actions + value_coef x MSE(value, return). Afterwards
-    the log-std is set to `reset_log_std` (None keeps the fitted one). Non-finite loss raises RuntimeError."""
+    Loss per batch: -mean log-likelihood of the expert actions + value_coef x MSE(value, return). `rotations`:
+    each sample is turned by its own random angle (`rotate_scene`; the caller checks `check_rotatable`), so the
+    actor learns the scene's rotation symmetry instead of needing demonstrations at every heading.
+    `detach_critic`: the return regression trains only the critic's own layers. Afterwards the log-std is set to
+    `reset_log_std` (None keeps the fitted one). Non-finite loss raises RuntimeError."""
     import torch
 
     policy = model.policy
@@ -205,8 +264,11 @@ def behaviour_clone(model: Any, demos: Demos, epochs: int = 30, batch_size: int 
         perm, total = torch.randperm(n, generator=gen), 0.0
         for start in range(0, n, batch_size):
             idx = perm[start:start + batch_size]
-            values, log_prob, _ = policy.evaluate_actions({k: v[idx] for k, v in obs.items()}, actions[idx])
-            loss = -log_prob.mean() + value_coef * torch.nn.functional.mse_loss(values.flatten(), returns[idx])
+            batch, target = {k: v[idx] for k, v in obs.items()}, actions[idx]
+            if rotations:
+                batch, target = rotate_scene(batch, target, torch.rand(len(idx), generator=gen) * (2.0 * np.pi))
+            values, log_prob = _evaluate(policy, batch, target, detach_critic)
+            loss = -log_prob.mean() + value_coef * torch.nn.functional.mse_loss(values, returns[idx])
             if not torch.isfinite(loss):
                 raise RuntimeError("behaviour cloning diverged (non-finite loss)")
             opt.zero_grad()

@@ -104,7 +104,8 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
         demos.save(out / "demos.npz")
     info: dict[str, Any] = {"demo_steps": len(demos.actions), "demo_episodes": len(demos.episode_seed),
                             "demo_success_rate": demos.success_rate}
-    losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, reset_log_std=cfg.log_std_init, seed=cfg.seed)
+    clone = {"reset_log_std": cfg.log_std_init, "rotations": cfg.bc_rotations, "detach_critic": cfg.bc_detach_critic}
+    losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, seed=cfg.seed, **clone)
     print(f"behaviour cloning: {len(demos.actions)} labelled steps (success in their episodes "
           f"{demos.success_rate:.2f}), loss {losses[0]:.3f} -> {losses[-1]:.3f}", flush=True)
     rounds = []
@@ -113,7 +114,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
         new = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.dagger_episodes, seed, cfg.gamma, workers,
                             learner=model.policy, beta=0.0, every=cfg.decision_every_steps, mpc=expert_mpc(cfg))
         demos = concat(demos, new)
-        losses = behaviour_clone(model, demos, epochs=cfg.bc_epochs, reset_log_std=cfg.log_std_init, seed=cfg.seed + r)
+        losses = behaviour_clone(model, demos, epochs=cfg.dagger_epochs or cfg.bc_epochs, seed=cfg.seed + r, **clone)
         rounds.append({"learner_success": new.success_rate, "steps": len(demos.actions), "loss": losses[-1]})
         print(f"DAgger round {r + 1}: the learner succeeded in {new.success_rate:.2f} of its {cfg.dagger_episodes} "
               f"episodes; {len(demos.actions)} labelled steps, loss {losses[-1]:.3f}", flush=True)
@@ -198,6 +199,7 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "bc_epochs": (int, "behaviour-cloning passes over the demonstrations, after each DAgger round too"),
     "dagger_rounds": (int, "DAgger rounds: roll the learner out, label its states by the expert, clone again"),
     "dagger_episodes": (int, "learner episodes per DAgger round"),
+    "dagger_epochs": (int, "cloning passes over the aggregate after each DAgger round (unset: --bc-epochs)"),
     "eval_every_steps": (int, "decisions between selection evaluations (the learning curve; the best is kept)"),
     "eval_episodes": (int, "selection episodes per evaluation (deterministic actions)"),
     "eval_seed": (int, "first seed of the selection episodes (never a suite's reported seed)"),
@@ -205,6 +207,10 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "threads": (int, "torch threads in the learner process"),
 }
 BOOL_HELP: dict[str, str] = {
+    "bc_rotations": "clone on scenes turned by random angles about the robot, so the agent need not see every "
+                    "heading (holonomic robot in a scene without walls only)",
+    "bc_detach_critic": "cloning fits the critic to the demonstrations' returns without moving the features the "
+                        "actor shares",
     "groups": "the extractor pools each pedestrian row with its group's rows (group ids in the observation)",
     "predictions": "predicted futures in the observation and the extractor (slower: the predictor runs every "
                    "step)",
@@ -239,8 +245,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pedestrians do not see the robot (CrowdNav's invisible setting), without --suite "
                         f"(default: {SCENARIO_DEFAULTS['invisible']})")
     for name, text in BOOL_HELP.items():
-        p.add_argument(f"--{name}", action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, dest=name,
-                       help=f"{text} (default: {getattr(defaults, name)})")
+        p.add_argument("--" + name.replace("_", "-"), action=argparse.BooleanOptionalAction,
+                       default=argparse.SUPPRESS, dest=name, help=f"{text} (default: {getattr(defaults, name)})")
     p.add_argument("--reward", action="append", default=None, metavar="TERM=WEIGHT",
                    help="reward weight override (repeatable): progress, success, collision, discomfort, "
                         "group_intrusion, time")
@@ -281,6 +287,12 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
         raise ValueError("--demos is used only with --warm-start bc or dagger")
     if args.demos is not None:
         check_demos(args.demos, cfg)
+    if cfg.bc_rotations:
+        if cfg.warm_start == "none":
+            raise ValueError("--bc-rotations is used only with --warm-start bc or dagger")
+        from envs.rl.imitation import check_rotatable
+
+        check_rotatable(cfg.env_config())
     out = args.resume or args.out or Path("out/train") / (cfg.env_cell or str(cfg.scenario))
     if args.resume is None and (out / "checkpoints" / "latest.zip").exists():
         raise ValueError(f"{out} already holds a run; use --resume {out} or another --out")
