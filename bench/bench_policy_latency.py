@@ -1,7 +1,8 @@
-"""Per-decision latency of the policies in CrowdNav's classic setting: the PPO agent against the MPC, side by side.
+"""Per-decision latency of the policies in CrowdNav's settings: the PPO agent against the MPC, side by side.
 
-Every policy runs the same episodes of `crowdnav-classic`'s cell (seeds 400000+, which no suite reports) and decides
-every 5 env steps (0.25 s), as the suite runs them: `ppo-crowdnav-classic` (its recorded decision period),
+Every policy runs the same episodes of the suite's cell (`--suite`: crowdnav-classic, 5 humans, with its agent
+`ppo-crowdnav-classic`; crowdnav-plusplus, 20 humans and a 5 m sensor, with `ppo-crowdnav-20`; seeds 400000+, which
+no suite reports) and decides every 5 env steps (0.25 s), as the suite runs them: the agent (its recorded period),
 `mpc-cv` and `mpc-gpgraph` (re-planning every 5 steps with the suite's planner defaults). Measured: the wall time
 of `envs.policies.act` at the decision steps (the policy's view of the env, its predictor, its solve or forward
 pass, and the action), one torch thread, one process. The table gives p50 / p95 / max in ms and the ratio of each
@@ -9,6 +10,7 @@ p50 and p95 to mpc-gpgraph's.
 
     python bench/bench_policy_latency.py              # 10 episodes per policy, about a minute
     python bench/bench_policy_latency.py --quick      # 2 episodes per policy
+    python bench/bench_policy_latency.py --suite crowdnav-plusplus
 """
 
 from __future__ import annotations
@@ -24,14 +26,13 @@ from envs.evaluation.suite import load_suite
 from envs.policies import ENV_MPC, PolicyConfig, act, make_policy
 from predictor import set_threads
 
-SUITE = "crowdnav-classic"
 SEED0 = 400_000
-POLICIES = ("ppo-crowdnav-classic", "mpc-cv", "mpc-gpgraph")
+AGENTS = {"crowdnav-classic": "ppo-crowdnav-classic", "crowdnav-plusplus": "ppo-crowdnav-20"}  # suite -> its agent
 
 
-def decision_times(name: str, episodes: int) -> np.ndarray:
+def decision_times(suite_name: str, name: str, episodes: int) -> np.ndarray:
     """Wall times (s) of `act` at the decision steps of `episodes` episodes of the suite's cell."""
-    suite = load_suite(SUITE)
+    suite = load_suite(suite_name)
     env = CrowdNavEnv(suite.cells[0].env_config(SEED0))
     every = suite.replan_every_steps or 1
     config = PolicyConfig(name) if name.startswith("ppo") else \
@@ -55,13 +56,15 @@ def decision_times(name: str, episodes: int) -> np.ndarray:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="2 episodes per policy")
+    ap.add_argument("--suite", choices=sorted(AGENTS), default="crowdnav-classic", help="the setting and its agent")
     args = ap.parse_args(argv)
     set_threads(1)
     episodes = 2 if args.quick else 10
-    rows = {name: decision_times(name, episodes) * 1e3 for name in POLICIES}
+    rows = {name: decision_times(args.suite, name, episodes) * 1e3
+            for name in (AGENTS[args.suite], "mpc-cv", "mpc-gpgraph")}
     ref = rows["mpc-gpgraph"]
-    print(f"{SUITE}, {episodes} episodes per policy (seeds {SEED0}+), one thread; {platform.processor() or 'cpu'}, "
-          f"Python {platform.python_version()}")
+    print(f"{args.suite}, {episodes} episodes per policy (seeds {SEED0}+), one thread; "
+          f"{platform.processor() or 'cpu'}, Python {platform.python_version()}")
     print("| policy | decisions | p50 (ms) | p95 (ms) | max (ms) | p50 / mpc-gpgraph | p95 / mpc-gpgraph |")
     print("|---|---|---|---|---|---|---|")
     for name, t in rows.items():

@@ -42,10 +42,11 @@ POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "orca": (),
     "ppo-crowdnav": ("--threads",),
     "ppo-crowdnav-classic": ("--threads",),
+    "ppo-crowdnav-20": ("--threads",),
 }
 SB3_FLAGS = ("--threads",)
 # registry policies acting on the observation (as sb3: and plug-ins do)
-OBSERVATION_POLICIES = ("ppo-crowdnav", "ppo-crowdnav-classic")
+OBSERVATION_POLICIES = ("ppo-crowdnav", "ppo-crowdnav-classic", "ppo-crowdnav-20")
 
 
 def flags_read(name: str) -> tuple[str, ...]:

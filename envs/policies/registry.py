@@ -19,6 +19,8 @@ Registry names:
     ppo-crowdnav-classic  the shipped PPO agent for CrowdNav's classic setting (suite crowdnav-classic: 5 ORCA humans
                   who do not see the robot, holonomic robot; acts every 0.25 s; RESULTS.md "RL agents for CrowdNav's
                   settings"); other envs refuse it (robot model)
+    ppo-crowdnav-20  the shipped PPO agent for CrowdNav++'s setting (suite crowdnav-plusplus: 20 ORCA humans who do
+                  not see the robot, holonomic robot, 5 m sensor; acts every 0.25 s; same RESULTS section)
 
 Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.policies.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
@@ -331,6 +333,7 @@ POLICIES: dict[str, Factory] = {
     "orca": lambda cfg, mpc, env: _orca_policy(env),
     "ppo-crowdnav": _agent("ppo-crowdnav"),
     "ppo-crowdnav-classic": _agent("ppo-crowdnav-classic"),
+    "ppo-crowdnav-20": _agent("ppo-crowdnav-20"),
 }
 
 

@@ -268,3 +268,18 @@ def test_the_packaged_classic_agent_crosses_crowdnavs_circle_and_only_there():
     assert make_policy("ppo-crowdnav-classic", CrowdNavEnv(cfg)).decision_every_steps == 5
     with pytest.raises(ValueError, match="robot_model 'holonomic' \\(agent\\) vs 'unicycle' \\(env\\)"):
         make_policy("ppo-crowdnav-classic", CrowdNavEnv(CrowdNavConfig()))
+
+
+def test_the_packaged_plusplus_agent_crosses_crowdnav_plusplus_and_only_there():
+    """`ppo-crowdnav-20` loads by name in crowdnav-plusplus's env (20 ORCA humans, 5 m sensor), acts every 5 env
+    steps and reaches the goal in most unseen episodes (seeds 400000+: no suite, training, selection or
+    demonstration seed; RESULTS reports the suite's 500). The unicycle env refuses it, naming the robot model."""
+    from envs.evaluation.evaluate import evaluate
+    from envs.policies import PolicyConfig, make_policy
+
+    cfg = load_suite("crowdnav-plusplus").cells[0].env_config(0)
+    res = evaluate(PolicyConfig("ppo-crowdnav-20"), cfg, episodes=12, seed=400_000, record=0, progress=False)
+    assert res["success_rate"] >= 10 / 12 and res["collision_rate"] <= 2 / 12
+    assert make_policy("ppo-crowdnav-20", CrowdNavEnv(cfg)).decision_every_steps == 5
+    with pytest.raises(ValueError, match="robot_model 'holonomic' \\(agent\\) vs 'unicycle' \\(env\\)"):
+        make_policy("ppo-crowdnav-20", CrowdNavEnv(CrowdNavConfig()))
