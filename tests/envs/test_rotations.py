@@ -115,3 +115,17 @@ def test_cloning_on_turned_scenes_learns_headings_never_demonstrated(one_thread)
         return float((mean - torch.tensor([0.0, 1.0])).norm(dim=1).mean())
 
     assert heading_error(True) < 0.3 < heading_error(False)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--bc-rotations"], "--bc-rotations is used only with --warm-start bc or dagger"),
+    (["--bc-rotations", "--warm-start", "bc"], "needs the holonomic robot"),
+    (["--suite", "crowdnav-plusplus", "--warm-start", "bc", "--bc-rotations", "--wall-rays", "8"], "wall rays"),
+])
+def test_rotations_misuse_is_one_line_and_writes_nothing(tmp_path, capsys, argv, message):
+    from envs.cli import main
+
+    assert main(["train", *argv, "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "run").exists()
