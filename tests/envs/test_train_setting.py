@@ -255,31 +255,20 @@ def test_the_demonstrating_mpc_runs_the_suites_planner_settings():
     assert mpc == replace(ENV_MPC, clearance_growth_mps=0.0) and ENV_MPC.clearance_growth_mps > 0
 
 
-def test_the_packaged_classic_agent_crosses_crowdnavs_circle_and_only_there():
-    """`ppo-crowdnav-classic` loads by name in crowdnav-classic's env, acts every 5 env steps (0.25 s) and reaches the
-    goal without contact in unseen episodes (seeds 400000+: no suite, training, selection or demonstration seed;
-    RESULTS reports the suite's 500). The unicycle env refuses it, naming the robot model."""
+@pytest.mark.parametrize("agent, suite, succeed, collide", [
+    ("ppo-crowdnav-classic", "crowdnav-classic", 11, 1),  # RESULTS: 500 of 500 in the suite
+    ("ppo-crowdnav-20", "crowdnav-plusplus", 10, 2),      # RESULTS: 0.936 / 0.064 in the suite
+])
+def test_a_packaged_holonomic_agent_reaches_its_goals_in_its_suite_and_only_there(agent, suite, succeed, collide):
+    """The agent loads by name in its suite's env, acts every 5 env steps (0.25 s) and reaches the goal in at least
+    `succeed` of 12 unseen episodes, colliding in at most `collide` (seeds 400000+: no suite, training, selection or
+    demonstration seed). The unicycle env refuses it, naming the robot model."""
     from envs.evaluation.evaluate import evaluate
     from envs.policies import PolicyConfig, make_policy
 
-    cfg = load_suite("crowdnav-classic").cells[0].env_config(0)
-    res = evaluate(PolicyConfig("ppo-crowdnav-classic"), cfg, episodes=12, seed=400_000, record=0, progress=False)
-    assert res["success_rate"] >= 11 / 12 and res["collision_rate"] <= 1 / 12
-    assert make_policy("ppo-crowdnav-classic", CrowdNavEnv(cfg)).decision_every_steps == 5
+    cfg = load_suite(suite).cells[0].env_config(0)
+    res = evaluate(PolicyConfig(agent), cfg, episodes=12, seed=400_000, record=0, progress=False)
+    assert res["success_rate"] >= succeed / 12 and res["collision_rate"] <= collide / 12
+    assert make_policy(agent, CrowdNavEnv(cfg)).decision_every_steps == 5
     with pytest.raises(ValueError, match="robot_model 'holonomic' \\(agent\\) vs 'unicycle' \\(env\\)"):
-        make_policy("ppo-crowdnav-classic", CrowdNavEnv(CrowdNavConfig()))
-
-
-def test_the_packaged_plusplus_agent_crosses_crowdnav_plusplus_and_only_there():
-    """`ppo-crowdnav-20` loads by name in crowdnav-plusplus's env (20 ORCA humans, 5 m sensor), acts every 5 env
-    steps and reaches the goal in most unseen episodes (seeds 400000+: no suite, training, selection or
-    demonstration seed; RESULTS reports the suite's 500). The unicycle env refuses it, naming the robot model."""
-    from envs.evaluation.evaluate import evaluate
-    from envs.policies import PolicyConfig, make_policy
-
-    cfg = load_suite("crowdnav-plusplus").cells[0].env_config(0)
-    res = evaluate(PolicyConfig("ppo-crowdnav-20"), cfg, episodes=12, seed=400_000, record=0, progress=False)
-    assert res["success_rate"] >= 10 / 12 and res["collision_rate"] <= 2 / 12
-    assert make_policy("ppo-crowdnav-20", CrowdNavEnv(cfg)).decision_every_steps == 5
-    with pytest.raises(ValueError, match="robot_model 'holonomic' \\(agent\\) vs 'unicycle' \\(env\\)"):
-        make_policy("ppo-crowdnav-20", CrowdNavEnv(CrowdNavConfig()))
+        make_policy(agent, CrowdNavEnv(CrowdNavConfig()))
