@@ -334,7 +334,11 @@ class CrowdNavEnv(gym.Env):
 
     def _sensed(self, p: Pedestrians) -> Pedestrians:
         """The rows of `p` within the sensor's surface gap (`ObservationConfig.sensor_gap_m`; all when it is inf)."""
-        keep = self._sensor_mask(p)
+        return self._rows(p, self._sensor_mask(p))
+
+    @staticmethod
+    def _rows(p: Pedestrians, keep: np.ndarray | None) -> Pedestrians:
+        """The rows of `p` that `keep` (N,) bool selects; `p` itself when keep is None."""
         return p if keep is None else Pedestrians(*(a[keep] for a in (p.pos, p.vel, p.radius, p.group_id, p.ped_id)))
 
     def _sensor_mask(self, p: Pedestrians) -> np.ndarray | None:
@@ -356,7 +360,7 @@ class CrowdNavEnv(gym.Env):
                 groups = self._pred_groups
         keep = self._sensor_mask(p)
         if keep is not None:
-            p, groups = self._sensed(p), groups[keep]
+            p, groups = self._rows(p, keep), groups[keep]  # the mask once, for the rows and their groups
             samples = None if samples is None else samples[:, :, keep]
         time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,

@@ -73,11 +73,9 @@ class TrainConfig:
         ints = ("decision_every_steps", "max_pedestrians", "total_steps", "envs", "workers", "n_steps", "batch_size",
                 "n_epochs", "demo_episodes", "bc_epochs", "dagger_rounds", "dagger_episodes", "eval_every_steps",
                 "eval_episodes", "checkpoint_every_steps", "threads")
-        for name in ints:
+        for name in ints + (("dagger_epochs",) if self.dagger_epochs is not None else ()):  # unset: bc_epochs
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
-        if self.dagger_epochs is not None and (not isinstance(self.dagger_epochs, int) or self.dagger_epochs < 1):
-            raise ValueError(f"dagger_epochs must be an integer >= 1 (or unset: bc_epochs), got {self.dagger_epochs!r}")
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
         if self.workers not in (1, self.envs):

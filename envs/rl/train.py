@@ -196,7 +196,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
                          "defaults apply)"),
     "demo_episodes": (int, "demonstration episodes for cloning (seeds --demo-seed onwards)"),
     "demo_seed": (int, "first seed of the demonstration and DAgger episodes (never a suite's reported seed)"),
-    "bc_epochs": (int, "behaviour-cloning passes over the demonstrations, after each DAgger round too"),
+    "bc_epochs": (int, "behaviour-cloning passes over the demonstrations (and after each DAgger round, unless "
+                       "--dagger-epochs)"),
     "dagger_rounds": (int, "DAgger rounds: roll the learner out, label its states by the expert, clone again"),
     "dagger_episodes": (int, "learner episodes per DAgger round"),
     "dagger_epochs": (int, "cloning passes over the aggregate after each DAgger round (unset: --bc-epochs)"),
