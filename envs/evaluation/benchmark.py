@@ -12,11 +12,12 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from envs.atomic import check_writable_dir
+from envs.config import CrowdNavConfig
 from envs.evaluation.bounds import BOUNDS, current_bounds, read_bounds
 from envs.evaluation.episode import EpisodeTask, fingerprint
 from envs.evaluation.evaluate import CtrlC, Interrupted, check_setup
@@ -24,7 +25,7 @@ from envs.evaluation.pool import run_tasks
 from envs.evaluation.records import EpisodeRecord, RecordStore, merge_records, read_records
 from envs.evaluation.suite import DEFAULT_DATA, Cell, Suite
 from envs.policies import PolicyConfig
-from envs.policies.identity import policy_identity
+from envs.policies.identity import agent_wall_rays, policy_identity
 
 RECORDS = "records.jsonl"
 
@@ -45,6 +46,14 @@ def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig, identity
                        *(policy_identity(policy) if identity is None else identity))
 
 
+def observed(config: CrowdNavConfig, wall_rays: int) -> CrowdNavConfig:
+    """`config` observing `wall_rays` range rays (an agent trained with them: the rays are part of what it sees;
+    they change nothing else, so the other policies' episodes are the same); unchanged for 0."""
+    if not wall_rays or config.observation.wall_rays == wall_rays:
+        return config
+    return replace(config, observation=replace(config.observation, wall_rays=wall_rays))
+
+
 def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[PolicyConfig], out: Path,
                    data: Path = DEFAULT_DATA, recorded: Sequence[EpisodeRecord] = ()) -> BenchmarkPlan:
     """The tasks of cells x policies x seeds and which of them are already `recorded` (records of the output
@@ -61,9 +70,10 @@ def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Polic
             if pcfg not in identities:
                 identities[pcfg] = policy_identity(pcfg)
             fp = episode_fingerprint(suite, cell, pcfg, identities[pcfg])
+            rays = agent_wall_rays(pcfg)
             for seed in cell.seeds:
-                task = EpisodeTask(cell.env_config(seed, data), pcfg, seed, cell=cell.name, fingerprint=fp,
-                                   error_dir=str(Path(out) / "errors"))
+                task = EpisodeTask(observed(cell.env_config(seed, data), rays), pcfg, seed, cell=cell.name,
+                                   fingerprint=fp, error_dir=str(Path(out) / "errors"))
                 tasks.append(task)
                 old = existing.get((cell.name, pcfg.name, seed))
                 if old is None:

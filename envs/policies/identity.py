@@ -64,3 +64,19 @@ def policy_identity(cfg: PolicyConfig) -> list[Any]:
         conf["mpc"] = {k: v for k, v in conf["mpc"].items() if k not in LATER_MPC_FIELDS or v != LATER_MPC_FIELDS[k]}
     digest = artifact_digest(cfg)
     return [conf] if digest is None else [conf, digest]
+
+
+def agent_wall_rays(cfg: PolicyConfig) -> int:
+    """The wall rays an SB3 agent policy (`sb3:` or a packaged agent) was trained to observe (its saved
+    observation's `walls` key); 0 for other policies and agents without rays."""
+    from envs.policies.sb3_files import read_agent, saved_signature
+
+    files = [f for f in artifact_files(cfg) if f.suffix == ".zip"]
+    if not files or not (cfg.name.startswith(SB3_PREFIX) or cfg.name in POLICIES):
+        return 0
+    try:
+        saved = saved_signature(*read_agent(files[-1])) or {}
+    except ValueError:
+        return 0  # not an agent file: loading it fails later, with its own message
+    return int((saved.get("keys", {}).get("walls") or [0])[0])
+

@@ -28,6 +28,7 @@ class TrainConfig:
 
     suite: str = ""                   # train in a simulated cell of this benchmark suite ("": the four below)
     cell: str = ""                    # the suite's cell ("": its only cell)
+    mix: str = ""                     # train in a mix of suite cells (envs.rl.mix.MIXES), instead of suite/scenario
     scenario: str | None = None       # None: circle_crossing (without a suite)
     pedestrians: int | None = None    # None: 5
     invisible: bool | None = None     # pedestrians do not see the robot (CrowdNav's invisible setting); None: True
@@ -56,6 +57,7 @@ class TrainConfig:
     demo_policy: str = "mpc-gpgraph"
     demo_episodes: int = 60
     demo_seed: int = 200_000
+    demo_successes_only: bool = False  # keep only the demonstrations the expert succeeded in (not DAgger's labels)
     bc_epochs: int = 30
     bc_rotations: bool = False        # clone on scenes turned at random (holonomic robot, no walls; check_rotatable)
     bc_detach_critic: bool = False    # cloning's return regression trains the critic's own layers only
@@ -95,15 +97,17 @@ class TrainConfig:
 
     def _resolve_env_fields(self) -> None:
         """Fill the env settings left None (no suite) with `SCENARIO_DEFAULTS`; with a suite, refuse any given."""
-        if not isinstance(self.suite, str) or not isinstance(self.cell, str):
-            raise ValueError("suite and cell must be names (strings)")
+        if not isinstance(self.suite, str) or not isinstance(self.cell, str) or not isinstance(self.mix, str):
+            raise ValueError("suite, cell and mix must be names (strings)")
         if self.cell and not self.suite:
             raise ValueError(f"cell {self.cell!r} needs its suite (--suite)")
-        if self.suite:
+        if self.mix and self.suite:
+            raise ValueError(f"mix {self.mix} names its own cells; drop --suite {self.suite}")
+        if self.suite or self.mix:
+            where = f"suite {self.suite}: its cell" if self.suite else f"mix {self.mix}: its cells"
             given = ["--" + k.replace("_", "-") for k in SCENARIO_DEFAULTS if getattr(self, k) is not None]
             if given:
-                raise ValueError(f"suite {self.suite}: its cell sets the env, so {', '.join(given)} would be ignored; "
-                                 "drop them")
+                raise ValueError(f"{where} set the env, so {', '.join(given)} would be ignored; drop them")
             return
         for key, value in SCENARIO_DEFAULTS.items():
             if getattr(self, key) is None:
@@ -125,18 +129,40 @@ class TrainConfig:
 
     @property
     def env_cell(self) -> str:
-        """The suite cell trained in ("" without a suite)."""
-        return suite_env_config(self.suite, self.cell)[0] if self.suite else ""
+        """The suite cell trained in ("" without a suite; the mix's name with one)."""
+        return suite_env_config(self.suite, self.cell)[0] if self.suite else self.mix
 
-    def env_config(self) -> CrowdNavConfig:
-        """The env every training and evaluation episode runs in: the suite cell's (with this run's observation
-        and reward weights), or the one the scenario fields describe."""
+    def reward_overrides(self) -> dict[str, float]:
+        """This run's reward weights as `RewardWeights` fields; ValueError naming the valid terms."""
         names = {"progress": "progress_per_m", "success": "success", "collision": "collision",
                  "discomfort": "discomfort_per_s", "group_intrusion": "group_intrusion_per_s", "time": "time_per_s"}
         unknown = [k for k, _ in self.rewards if k not in names]
         if unknown:
             raise ValueError(f"unknown reward term(s) {unknown}; valid: {', '.join(names)}")
-        overrides = {names[k]: float(v) for k, v in self.rewards}
+        return {names[k]: float(v) for k, v in self.rewards}
+
+    def mixture(self) -> Any:
+        """The `envs.rl.mix.Mix` trained in (None without --mix), with this run's observation and reward weights."""
+        if not self.mix:
+            return None
+        from envs.rl.mix import build_mix
+
+        obs = (("max_pedestrians", self.max_pedestrians), ("predictions", self.predictions),
+               ("wall_rays", self.wall_rays))
+        return build_mix(self.mix, obs, tuple(sorted(self.reward_overrides().items())))
+
+    def config_for(self, seed: int) -> CrowdNavConfig:
+        """The env config of episode `seed`: its mix cell's, else `env_config()`."""
+        mix = self.mixture()
+        return mix.config_for(seed) if mix is not None else self.env_config()
+
+    def env_config(self) -> CrowdNavConfig:
+        """The env every training and evaluation episode runs in: the suite cell's (with this run's observation
+        and reward weights), or the one the scenario fields describe. With a mix: its first cell's, whose
+        observation layout and robot every cell shares (`config_for` gives each episode's)."""
+        overrides = self.reward_overrides()
+        if self.mix:
+            return self.mixture().base
         if self.suite:
             _, cfg = suite_env_config(self.suite, self.cell)
             obs = replace(cfg.observation, max_pedestrians=self.max_pedestrians, predictions=self.predictions,

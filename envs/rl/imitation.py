@@ -23,6 +23,7 @@ from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.policies import PolicyConfig, act, make_policy
+from envs.rl.mix import Mix
 
 
 @dataclass
@@ -114,20 +115,29 @@ def _chunk(args: tuple) -> list[tuple[dict, np.ndarray, np.ndarray, str]]:
         learner = cls(**kwargs)
         learner.load_state_dict(state)
         learner.set_training_mode(False)
-    env = CrowdNavEnv(config)
-    expert = make_policy(PolicyConfig(name=policy, replan_every_steps=every, **({"mpc": mpc} if mpc else {})), env)
-    rng = np.random.default_rng(seeds[0])
-    return [_episode(env, expert, s, gamma, learner, beta, rng, every) for s in seeds]
+    built: dict[str, tuple[CrowdNavEnv, Any]] = {}  # one env and expert per cell (a mix has many)
+    rng, out = np.random.default_rng(seeds[0]), []
+    for s in seeds:
+        label, cfg = config.cell_of(s) if isinstance(config, Mix) else ("", config)
+        if label not in built:
+            env = CrowdNavEnv(cfg)
+            built[label] = env, make_policy(PolicyConfig(name=policy, replan_every_steps=every,
+                                                         **({"mpc": mpc} if mpc else {})), env)
+        out.append(_episode(*built[label], s, gamma, learner, beta, rng, every))
+    return out
 
 
-def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes: int = 60, seed: int = 0,
+def collect_demos(config: CrowdNavConfig | Mix, policy: str = "mpc-gpgraph", episodes: int = 60, seed: int = 0,
                   gamma: float = 0.99, workers: int = 1, learner: Any = None, beta: float = 1.0,
-                  every: int = 1, mpc: Any = None) -> Demos:
-    """`episodes` episodes labelled by `policy` (seeds seed .. seed + episodes - 1) over `workers` processes, at
+                  every: int = 1, mpc: Any = None, successes_only: bool = False) -> Demos:
+    """`episodes` episodes labelled by `policy` (seeds seed .. seed + episodes - 1) over `workers` processes, in
+    `config`'s env or, for an `envs.rl.mix.Mix`, in each seed's cell, at
     a decision every `every` env steps (`_episode`; a planner expert re-plans every `every` steps). With a
     `learner` (an SB3 policy), each decision runs the learner's action with probability 1 - beta (DAgger);
     `episode_outcome` is then the outcome of the executed (mixed) episode. `mpc` (a `planner.MPCConfig`): the
-    expert MPC's settings (None: the env's, `envs.policies.ENV_MPC`), e.g. a benchmark suite's planner defaults."""
+    expert MPC's settings (None: the env's, `envs.policies.ENV_MPC`), e.g. a benchmark suite's planner defaults.
+    `successes_only`: keep only the episodes that ended in success (the expert's failures teach failing);
+    ValueError when none did."""
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     if not isinstance(every, int) or every < 1:
@@ -149,6 +159,10 @@ def collect_demos(config: CrowdNavConfig, policy: str = "mpc-gpgraph", episodes:
         parts = [results[i] for i in range(len(chunks))]
     order = sorted(((s, ep) for c, part in zip(chunks, parts, strict=True) for s, ep in zip(c[2], part, strict=True)),
                    key=lambda x: x[0])
+    if successes_only:
+        order = [(s, ep) for s, ep in order if ep[3] == "success"]
+        if not order:
+            raise ValueError(f"none of the {episodes} demonstrations by {policy} succeeded; nothing to learn from")
     eps = [ep for _, ep in order]
     obs = {k: np.concatenate([e[0][k] for e in eps]) for k in eps[0][0]}
     return Demos(obs, np.concatenate([e[1] for e in eps]).astype(np.float32),

@@ -14,6 +14,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from envs.atomic import write_json_atomic
+from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.evaluation.episode import episode_record, run_episode
 from envs.evaluation.stats import aggregate
@@ -67,8 +68,9 @@ class TrainMonitor(BaseCallback):
     def __init__(self, cfg: Any, out: Path) -> None:
         super().__init__()
         self.cfg, self.out = cfg, out
-        self.env_config = cfg.env_config()
-        self.eval_env = CrowdNavEnv(self.env_config)
+        self.env_config = cfg.env_config()  # the observation layout saved with the agent (a mix's first cell)
+        self.mix = cfg.mixture()
+        self.eval_envs: dict[str, CrowdNavEnv] = {}  # one per cell evaluated in
         self.wall_before = 0.0  # wall seconds of earlier sessions (resume)
         self.t0 = time.perf_counter()
         self.steps0 = 0
@@ -114,8 +116,10 @@ class TrainMonitor(BaseCallback):
         """Deterministic episodes on the eval seeds, harness metrics; appends a row to eval.csv."""
         policy = ModelPolicy(model, every=self.cfg.decision_every_steps)
         seeds = range(self.cfg.eval_seed, self.cfg.eval_seed + self.cfg.eval_episodes)
-        records = [episode_record(run_episode(self.env_config, "", s, env=self.eval_env, policy=policy), policy.name, s)
-                   for s in seeds]
+        records = []
+        for s in seeds:
+            config, env = self._eval_env(s)
+            records.append(episode_record(run_episode(config, "", s, env=env, policy=policy), policy.name, s))
         summary = aggregate(records)  # the harness's own definitions (envs.evaluation.stats)
         keys = {"success": "success_rate", "collision": "collision_rate", "timeout": "timeout_rate",
                 "mean_return": "mean_return", "time_to_goal_s": "time_to_goal_s", "intrusion": "group_intrusion_rate",
@@ -137,6 +141,13 @@ class TrainMonitor(BaseCallback):
             self.best_success, self.best_return = float(row["success"]), float(row["mean_return"])
             save_agent(model, self.out / "checkpoints" / "best.zip", self.env_config, self._meta(model))
         return row
+
+    def _eval_env(self, seed: int) -> tuple[CrowdNavConfig, CrowdNavEnv]:
+        """(config, env) of evaluation episode `seed`: the run's env, or its mix cell's; envs are kept."""
+        label, config = self.mix.cell_of(seed) if self.mix is not None else ("", self.env_config)
+        if label not in self.eval_envs:
+            self.eval_envs[label] = CrowdNavEnv(config)
+        return config, self.eval_envs[label]
 
     # ----------------------------------------------------------------------------------- checkpoints
     @property

@@ -124,13 +124,18 @@ class DecisionPeriod(gym.Wrapper):
 
 
 def add_setting_arguments(p: argparse.ArgumentParser) -> None:
-    """`crowdnav train`'s --suite, --cell and --decision-every-steps (TrainConfig fields; unset: the defaults)."""
+    """`crowdnav train`'s --suite, --cell, --mix and --decision-every-steps (TrainConfig fields; unset: the
+    defaults)."""
     p.add_argument("--suite", type=str, default=argparse.SUPPRESS, dest="suite", metavar="NAME",
                    help="train in a simulated cell of this benchmark suite (envs/evaluation/suites): its crowd model, "
                         "robot, dt and time limit; --scenario, --pedestrians, --invisible and --time-limit-s are then "
                         "errors (evaluate with crowdnav benchmark --suite NAME --policy sb3:OUT/final.zip)")
     p.add_argument("--cell", type=str, default=argparse.SUPPRESS, dest="cell", metavar="NAME",
                    help="the suite's cell (default: its only cell)")
+    p.add_argument("--mix", type=str, default=argparse.SUPPRESS, dest="mix", metavar="NAME",
+                   help="train a generalist in a mix of suite cells (envs/rl/mix.py MIXES, e.g. crowdnav-v1-train: "
+                        "crowdnav-v1's simulated cells and two recorded crowds outside every test split), each "
+                        "episode in one of them; instead of --suite and the scenario flags")
     p.add_argument("--decision-every-steps", type=int, default=argparse.SUPPRESS, dest="decision_every_steps",
                    metavar="K", help="env steps per agent decision, the action held in between (e.g. 5 at dt 0.05 s: "
                                      "CrowdNav's 0.25 s); saved with the agent, which sb3: then runs at this period; "

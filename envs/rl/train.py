@@ -50,15 +50,17 @@ def make_vec_env(cfg: TrainConfig) -> Any:
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from envs.env import CrowdNavEnv
+    from envs.rl.mix import MixEnv
     from envs.rl.setting import DecisionPeriod
 
-    env_cfg = cfg.env_config()
+    mix = cfg.mixture()
+    env_cls, env_kwargs = (MixEnv, {"mix": mix}) if mix is not None else (CrowdNavEnv, {"config": cfg.env_config()})
     vec_cls = DummyVecEnv if cfg.workers == 1 else SubprocVecEnv
     kwargs = {"start_method": "forkserver"} if cfg.workers > 1 else None
     wrapper = {"wrapper_class": DecisionPeriod, "wrapper_kwargs": {"every": cfg.decision_every_steps}} \
         if cfg.decision_every_steps > 1 else {}
-    return sb3_make_vec_env(CrowdNavEnv, n_envs=cfg.envs, seed=TRAIN_SEED_OFFSET + cfg.seed, vec_env_cls=vec_cls,
-                            env_kwargs={"config": env_cfg}, vec_env_kwargs=kwargs, **wrapper)
+    return sb3_make_vec_env(env_cls, n_envs=cfg.envs, seed=TRAIN_SEED_OFFSET + cfg.seed, vec_env_cls=vec_cls,
+                            env_kwargs=env_kwargs, vec_env_kwargs=kwargs, **wrapper)
 
 
 def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
@@ -79,13 +81,13 @@ def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
 
 def expert_mpc(cfg: TrainConfig) -> Any:
     """The demonstrating MPC's settings: in a suite, the env's MPC with the suite's planner defaults (what
-    `crowdnav benchmark` runs there); else None (the env's MPC)."""
-    if not cfg.suite:
+    `crowdnav benchmark` runs there; in a mix, its first suite's); else None (the env's MPC)."""
+    if not cfg.suite and not cfg.mix:
         return None
     from envs.evaluation.suite import load_suite
     from envs.policies import ENV_MPC
 
-    return load_suite(cfg.suite).mpc_config(ENV_MPC)
+    return load_suite(cfg.suite or cfg.mixture().mpc_suite).mpc_config(ENV_MPC)
 
 
 def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None) -> dict[str, Any]:
@@ -95,12 +97,14 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     from envs.rl.imitation import Demos, behaviour_clone, collect_demos, concat
 
     start, workers = time.perf_counter(), min(max(2, cfg.workers), os.cpu_count() or 2)
+    setting = cfg.mixture() or cfg.env_config()  # a mix: each episode seed in its cell
     if demos_path is not None:
         demos = Demos.load(demos_path)
     else:
         print(f"collecting {cfg.demo_episodes} {cfg.demo_policy} demonstrations ...", flush=True)
-        demos = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.demo_episodes, cfg.demo_seed, cfg.gamma,
-                              workers=workers, every=cfg.decision_every_steps, mpc=expert_mpc(cfg))
+        demos = collect_demos(setting, cfg.demo_policy, cfg.demo_episodes, cfg.demo_seed, cfg.gamma, workers=workers,
+                              every=cfg.decision_every_steps, mpc=expert_mpc(cfg),
+                              successes_only=cfg.demo_successes_only)
         demos.save(out / "demos.npz")
     info: dict[str, Any] = {"demo_steps": len(demos.actions), "demo_episodes": len(demos.episode_seed),
                             "demo_success_rate": demos.success_rate}
@@ -111,7 +115,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     rounds = []
     for r in range(cfg.dagger_rounds if cfg.warm_start == "dagger" else 0):
         seed = cfg.demo_seed + cfg.demo_episodes + r * cfg.dagger_episodes
-        new = collect_demos(cfg.env_config(), cfg.demo_policy, cfg.dagger_episodes, seed, cfg.gamma, workers,
+        new = collect_demos(setting, cfg.demo_policy, cfg.dagger_episodes, seed, cfg.gamma, workers,
                             learner=model.policy, beta=0.0, every=cfg.decision_every_steps, mpc=expert_mpc(cfg))
         demos = concat(demos, new)
         losses = behaviour_clone(model, demos, epochs=cfg.dagger_epochs or cfg.bc_epochs, seed=cfg.seed + r, **clone)
@@ -212,6 +216,7 @@ BOOL_HELP: dict[str, str] = {
                     "heading (holonomic robot in a scene without walls only)",
     "bc_detach_critic": "cloning fits the critic to the demonstrations' returns without moving the features the "
                         "actor shares",
+    "demo_successes_only": "keep only the demonstrations (not the DAgger labels) whose episode the expert won",
     "groups": "the extractor pools each pedestrian row with its group's rows (group ids in the observation)",
     "predictions": "predicted futures in the observation and the extractor (slower: the predictor runs every "
                    "step)",
