@@ -1,16 +1,19 @@
 """Per-decision latency of the policies in CrowdNav's settings: the PPO agent against the MPC, side by side.
 
 Every policy runs the same episodes of the suite's cell (`--suite`: crowdnav-classic, 5 humans, with its agent
-`ppo-crowdnav-classic`; crowdnav-plusplus, 20 humans and a 5 m sensor, with `ppo-crowdnav-20`; seeds 400000+, which
-no suite reports) and decides every 5 env steps (0.25 s), as the suite runs them: the agent (its recorded period),
-`mpc-cv` and `mpc-gpgraph` (re-planning every 5 steps with the suite's planner defaults). Measured: the wall time
-of `envs.policies.act` at the decision steps (the policy's view of the env, its predictor, its solve or forward
-pass, and the action), one torch thread, one process. The table gives p50 / p95 / max in ms and the ratio of each
-p50 and p95 to mpc-gpgraph's.
+`ppo-crowdnav-classic`; crowdnav-plusplus, 20 humans and a 5 m sensor, with `ppo-crowdnav-20`; crowdnav-v1's
+`--cell`, default corridor-high-visible, with the generalist `ppo-crowdnav`; `--agent` names another; seeds
+400000+, which no suite reports) and decides as the suite runs it: the agent at its recorded period (with the wall
+rays it was trained with), `mpc-cv` and `mpc-gpgraph` re-planning every `replan_every_steps` of the suite (5 in
+CrowdNav's settings, 1 in crowdnav-v1) with the suite's planner defaults. Measured: the wall time of
+`envs.policies.act` at each policy's decision steps (the policy's view of the env, its predictor, its solve or
+forward pass, and the action), one torch thread, one process. The table gives p50 / p95 / max in ms and the ratio
+of each p50 and p95 to mpc-gpgraph's.
 
     python bench/bench_policy_latency.py              # 10 episodes per policy, about a minute
     python bench/bench_policy_latency.py --quick      # 2 episodes per policy
     python bench/bench_policy_latency.py --suite crowdnav-plusplus
+    python bench/bench_policy_latency.py --suite crowdnav-v1 --cell crossing-high-visible
 """
 
 from __future__ import annotations
@@ -22,22 +25,28 @@ import time
 import numpy as np
 
 from envs.env import CrowdNavEnv
+from envs.evaluation.benchmark import observed
 from envs.evaluation.suite import load_suite
 from envs.policies import ENV_MPC, PolicyConfig, act, make_policy
+from envs.policies.identity import agent_wall_rays
 from predictor import set_threads
 
 SEED0 = 400_000
-AGENTS = {"crowdnav-classic": "ppo-crowdnav-classic", "crowdnav-plusplus": "ppo-crowdnav-20"}  # suite -> its agent
+AGENTS = {"crowdnav-classic": "ppo-crowdnav-classic", "crowdnav-plusplus": "ppo-crowdnav-20",
+          "crowdnav-v1": "ppo-crowdnav"}  # suite -> its agent
+CELLS = {"crowdnav-v1": "corridor-high-visible"}  # suite -> default cell (others: their only one)
 
 
-def decision_times(suite_name: str, name: str, episodes: int) -> np.ndarray:
-    """Wall times (s) of `act` at the decision steps of `episodes` episodes of the suite's cell."""
+def decision_times(suite_name: str, cell: str, name: str, episodes: int) -> np.ndarray:
+    """Wall times (s) of `act` at the policy's decision steps of `episodes` episodes of the suite's cell."""
     suite = load_suite(suite_name)
-    env = CrowdNavEnv(suite.cells[0].env_config(SEED0))
+    agent = name.startswith(("ppo", "sb3:"))
     every = suite.replan_every_steps or 1
-    config = PolicyConfig(name) if name.startswith("ppo") else \
+    config = PolicyConfig(name) if agent else \
         PolicyConfig(name, mpc=suite.mpc_config(ENV_MPC), replan_every_steps=every)
+    env = CrowdNavEnv(observed(suite.cell(cell).env_config(SEED0), agent_wall_rays(config)))
     policy = make_policy(config, env)
+    every = getattr(policy, "decision_every_steps", every)
     times = []
     for seed in range(SEED0, SEED0 + episodes):
         env.reset(seed=seed)
@@ -57,13 +66,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="2 episodes per policy")
     ap.add_argument("--suite", choices=sorted(AGENTS), default="crowdnav-classic", help="the setting and its agent")
+    ap.add_argument("--cell", default=None, help="the suite's cell (default: crowdnav-v1 corridor-high-visible, "
+                                                   "else the suite's first)")
+    ap.add_argument("--agent", default=None, help="the agent (registry name or sb3:PATH.zip; default: the suite's)")
     args = ap.parse_args(argv)
     set_threads(1)
     episodes = 2 if args.quick else 10
-    rows = {name: decision_times(args.suite, name, episodes) * 1e3
-            for name in (AGENTS[args.suite], "mpc-cv", "mpc-gpgraph")}
+    cell = args.cell or CELLS.get(args.suite) or load_suite(args.suite).cells[0].name
+    rows = {name: decision_times(args.suite, cell, name, episodes) * 1e3
+            for name in (args.agent or AGENTS[args.suite], "mpc-cv", "mpc-gpgraph")}
     ref = rows["mpc-gpgraph"]
-    print(f"{args.suite}, {episodes} episodes per policy (seeds {SEED0}+), one thread; "
+    print(f"{args.suite} {cell}, {episodes} episodes per policy (seeds {SEED0}+), one thread; "
           f"{platform.processor() or 'cpu'}, Python {platform.python_version()}")
     print("| policy | decisions | p50 (ms) | p95 (ms) | max (ms) | p50 / mpc-gpgraph | p95 / mpc-gpgraph |")
     print("|---|---|---|---|---|---|---|")
