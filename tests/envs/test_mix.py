@@ -123,3 +123,21 @@ def test_the_benchmark_shows_a_wall_ray_agent_its_rays_and_nobody_else(tmp_path)
     task = next(t for t in plan.tasks if t.policy.name.startswith("sb3:"))
     record = run_task(replace(task, seed=0))["record"]
     assert record.outcome != "error" and record.steps >= 1
+
+
+def test_the_packaged_generalist_sees_its_rays_in_the_benchmark_and_reaches_its_goals():
+    """`ppo-crowdnav-mix` (RESULTS: 10 of 10 in plaza-low-visible) runs through the benchmark's own task path with
+    the 16 rays it was trained with, and an env without rays refuses it."""
+    from envs.evaluation.episode import run_task
+    from envs.policies import make_policy
+    from envs.policies.identity import agent_wall_rays
+
+    suite = load_suite("crowdnav-v1")
+    cell = suite.cell("plaza-low-visible")
+    agent = PolicyConfig("ppo-crowdnav-mix")
+    assert agent_wall_rays(agent) == 16
+    plan = plan_benchmark(suite, [cell], [agent], "/nonexistent-out")
+    outcomes = [run_task(t)["record"].outcome for t in plan.tasks]
+    assert len(outcomes) == 10 and outcomes.count("success") >= 8, outcomes
+    with pytest.raises(ValueError, match="observation"):
+        make_policy(agent, CrowdNavEnv(cell.env_config(0)))

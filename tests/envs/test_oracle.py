@@ -64,9 +64,17 @@ def _robot_for(name: str) -> RobotConfig:
     return replace(RobotConfig(), model=model)
 
 
+def _for(name: str, config: CrowdNavConfig) -> CrowdNavConfig:
+    """`config` with the robot a registry policy runs and the wall rays a packaged agent was trained with."""
+    from envs.evaluation.benchmark import observed
+    from envs.policies import PolicyConfig
+    from envs.policies.identity import agent_wall_rays
+
+    return observed(replace(config, robot=_robot_for(name)), agent_wall_rays(PolicyConfig(name)))
+
+
 def _actions(replay: ReplayConfig, name: str, steps: int) -> np.ndarray:
-    env = CrowdNavEnv(CrowdNavConfig(scenario="replay", replay=replay, warmup_s=0.0, time_limit_s=20.0,
-                                     robot=_robot_for(name)))
+    env = CrowdNavEnv(_for(name, CrowdNavConfig(scenario="replay", replay=replay, warmup_s=0.0, time_limit_s=20.0)))
     policy = make_policy(name, env)
     env.reset(seed=0)
     policy.reset(0)
@@ -99,7 +107,7 @@ def test_only_the_oracle_sees_the_recording_ahead(tmp_path):
 def test_the_view_holds_the_future_only_for_a_policy_that_reads_it():
     env = CrowdNavEnv(CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, robot_visible=False))
     env.reset(seed=0)
-    envs = {n: CrowdNavEnv(replace(env.config, robot=_robot_for(n))) for n in POLICIES}
+    envs = {n: CrowdNavEnv(_for(n, env.config)) for n in POLICIES}
     readers = [n for n in POLICIES if getattr(make_policy(n, envs[n]), "reads_future", False)]
     assert readers == ["mpc-oracle", "mpc-oracle-paths"]
     assert env.view().future is None
