@@ -2,7 +2,7 @@
 
 Every policy runs the same episodes of the suite's cell (`--suite`: crowdnav-classic, 5 humans, with its agent
 `ppo-crowdnav-classic`; crowdnav-plusplus, 20 humans and a 5 m sensor, with `ppo-crowdnav-20`; crowdnav-v1's
-`--cell`, default corridor-high-visible, with the generalist `ppo-crowdnav`; `--agent` names another; seeds
+`--cell`, default corridor-high-visible, with the generalist `ppo-crowdnav-mix`; `--agent` names another; seeds
 400000+, which no suite reports) and decides as the suite runs it: the agent at its recorded period (with the wall
 rays it was trained with), `mpc-cv` and `mpc-gpgraph` re-planning every `replan_every_steps` of the suite (5 in
 CrowdNav's settings, 1 in crowdnav-v1) with the suite's planner defaults. Measured: the wall time of
@@ -33,7 +33,7 @@ from predictor import set_threads
 
 SEED0 = 400_000
 AGENTS = {"crowdnav-classic": "ppo-crowdnav-classic", "crowdnav-plusplus": "ppo-crowdnav-20",
-          "crowdnav-v1": "ppo-crowdnav"}  # suite -> its agent
+          "crowdnav-v1": "ppo-crowdnav-mix"}  # suite -> its agent
 CELLS = {"crowdnav-v1": "corridor-high-visible"}  # suite -> default cell (others: their only one)
 
 

@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from envs.config import CrowdNavConfig, ObservationConfig, RewardWeights
 from envs.rl.setting import TRAIN_SEED_OFFSET, check_disjoint, check_seeds, suite_env_config
+
+if TYPE_CHECKING:
+    from envs.rl.mix import Mix
 
 WARM_STARTS = ("none", "bc", "dagger")
 # The env settings of a run without a suite (None in TrainConfig: not given). With a suite they come from its cell,
@@ -141,7 +144,7 @@ class TrainConfig:
             raise ValueError(f"unknown reward term(s) {unknown}; valid: {', '.join(names)}")
         return {names[k]: float(v) for k, v in self.rewards}
 
-    def mixture(self) -> Any:
+    def mixture(self) -> Mix | None:
         """The `envs.rl.mix.Mix` trained in (None without --mix), with this run's observation and reward weights."""
         if not self.mix:
             return None
@@ -151,18 +154,13 @@ class TrainConfig:
                ("wall_rays", self.wall_rays))
         return build_mix(self.mix, obs, tuple(sorted(self.reward_overrides().items())))
 
-    def config_for(self, seed: int) -> CrowdNavConfig:
-        """The env config of episode `seed`: its mix cell's, else `env_config()`."""
-        mix = self.mixture()
-        return mix.config_for(seed) if mix is not None else self.env_config()
-
     def env_config(self) -> CrowdNavConfig:
         """The env every training and evaluation episode runs in: the suite cell's (with this run's observation
         and reward weights), or the one the scenario fields describe. With a mix: its first cell's, whose
-        observation layout and robot every cell shares (`config_for` gives each episode's)."""
-        overrides = self.reward_overrides()
+        observation layout and robot every cell shares (`mixture().config_for` gives each episode's)."""
         if self.mix:
             return self.mixture().base
+        overrides = self.reward_overrides()
         if self.suite:
             _, cfg = suite_env_config(self.suite, self.cell)
             obs = replace(cfg.observation, max_pedestrians=self.max_pedestrians, predictions=self.predictions,

@@ -84,14 +84,16 @@ def test_a_real_sigint_during_a_benchmark(tmp_path, workers):
     """SIGINT while episodes run, as a terminal's Ctrl-C sends it to the whole process group (the parent and, with 2
     workers, the pool's processes): exit 130, one line (no worker prints a stray KeyboardInterrupt), the records
     kept."""
-    # two cells x three policies x two episodes, about 1 s each: the run must still be going when the signal comes
-    # (with one cell, and then with two policies, it could finish first on a loaded machine, 2026-11-26)
+    # two cells x two policies x two episodes, about 1 s each: the run must still be going when the signal comes
+    # (with one cell it could finish first on a loaded machine, 2026-11-26)
     args = [sys.executable, "-m", "envs.cli", "benchmark", "--suite", "smoke", "--cells",
-            "corridor-low-visible,circle-low-invisible", "--policy", "mpc-cv", "mpc-none", "mpc-oracle",
-            "--workers", str(workers),
+            "corridor-low-visible,circle-low-invisible", "--policy", "mpc-cv", "mpc-none", "--workers", str(workers),
             "--no-progress", "--out", str(tmp_path)]
+    # SIGINT as a terminal leaves it: a runner started in the background (`cmd &`, nohup) ignores SIGINT, and the
+    # child would inherit that and run to the end (exit 0)
     proc = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"}, start_new_session=True)
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"}, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     records = tmp_path / RECORDS
     deadline = time.monotonic() + 120
     while not (records.exists() and records.read_text().count("\n") >= 1):
@@ -103,5 +105,5 @@ def test_a_real_sigint_during_a_benchmark(tmp_path, workers):
     saved = len(read_records(records))
     assert proc.returncode == 130, err
     assert "Traceback" not in out + err and len(lines) == 1, err
-    assert lines[0] == (f"crowdnav: interrupted: {saved} of 12 episodes saved in {records}; "
-                        "rerun the same command to resume") and 1 <= saved < 12
+    assert lines[0] == (f"crowdnav: interrupted: {saved} of 8 episodes saved in {records}; "
+                        "rerun the same command to resume") and 1 <= saved < 8

@@ -90,7 +90,7 @@ def test_demonstrations_in_a_mix_come_from_each_seeds_cell():
 def test_the_run_settings_of_a_mix(tmp_path, capsys):
     cfg = TrainConfig(mix="crowdnav-v1-train", wall_rays=8, max_pedestrians=10, rewards=(("collision", -20.0),))
     for s in (0, 7, 29):
-        c = cfg.config_for(s)
+        c = cfg.mixture().config_for(s)
         assert c.observation.wall_rays == 8 and c.observation.max_pedestrians == 10 and c.rewards.collision == -20.0
     assert cfg.env_config() == cfg.mixture().cells[0][1] and cfg.env_cell == "crowdnav-v1-train"
     for argv, message in ((["--mix", "crowdnav-v1-train", "--suite", "crowdnav-classic"], "drop --suite"),
