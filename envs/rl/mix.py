@@ -62,6 +62,7 @@ class Mix:
         return self.cells[0][1]
 
 
+@lru_cache(maxsize=1)
 def reported_recordings() -> frozenset[str]:
     """The resolved paths of every recording a non-tuning shipped suite replays (the ETH/UCY test files)."""
     from importlib import resources
