@@ -25,6 +25,7 @@ import numpy as np
 
 from crowdsim.state import CrowdState
 from envs.crowd import match_ids
+from envs.replay_overlay import overlay_rows
 from predictor.ethucy import (  # the one ETH/UCY reader (torch-free)
     GROUP_OVERLAPS,
     STEP_S,
@@ -83,7 +84,10 @@ class ReplayConfig:
         min_remaining_s: recording time a random start leaves before the end (clipped to what exists), s.
         capacity: rows of the state arrays; None: the most pedestrians ever in the scene at once.
         walls: wall segments ((x0, y0), (x1, y1)) in m; none by default.
-        name: scenario name; None: the trajectory file's stem.
+        name: scenario name; None: the trajectory file's stem (with `_x<overlay>` when overlaid).
+        overlay: superimpose this many circularly time-shifted copies of the recording (`envs.replay_overlay`):
+            a crowd K times as dense from a sparse recording; 1 (the default): the recording as it is. Not with a
+            group file (the copies' ids are new).
     """
 
     path: Path | str
@@ -103,6 +107,7 @@ class ReplayConfig:
     capacity: int | None = None
     walls: Sequence = ()
     name: str | None = None
+    overlay: int = 1
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "path", Path(self.path))
@@ -119,6 +124,8 @@ class ReplayConfig:
         inc = self.frame_increment
         _check(inc is None or (math.isfinite(inc) and inc > 0), "frame_increment must be > 0 or None")
         _check(self.route_tries >= 1, "route_tries must be >= 1")
+        _check(isinstance(self.overlay, int) and self.overlay >= 1, "overlay must be an integer >= 1")
+        _check(self.overlay == 1 or self.groups_path is None, "overlay > 1 cannot take a group file (new ids)")
         _check(self.start_mode in START_MODES, f"start_mode must be one of {START_MODES}")
         _check(self.capacity is None or self.capacity >= 1, "capacity must be >= 1 or None")
         walls = np.asarray(self.walls, dtype=float)
@@ -190,10 +197,13 @@ class ReplayCrowd:
 
     def __init__(self, config: ReplayConfig) -> None:
         self.config = config
-        self.name = config.name or config.path.stem
+        self.name = config.name or config.path.stem + (f"_x{config.overlay}" if config.overlay > 1 else "")
         self.dt_s = config.dt_s
         self.walls = config.walls_array
-        self._load_tracks(read_trajectories(config.path))
+        rows = read_trajectories(config.path)
+        if config.overlay > 1:
+            rows = overlay_rows(rows, config.overlay, config.frame_increment or infer_frame_increment(rows[:, 0]))
+        self._load_tracks(rows)
         self._load_groups()
         self.bounds = self._bounds()
         self.duration_s = float(self._last.max()) * config.frame_step_s

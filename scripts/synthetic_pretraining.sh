@@ -6,6 +6,7 @@
 #             group assigner, trained on crowdsim's realistic-v1 preset only, RESULTS.md "Default synthetic
 #             predictor"; the fine-tuned runs use that assigner too), then the same EPOCHS epochs;
 #   pretrainlow  (only with VARIANTS="pretrainlow") the same fine-tuning at lr 0.001 instead of 0.01;
+#   pretrainvlow (only with VARIANTS="pretrainvlow") at lr 0.0001;
 #   zeroshot  INIT itself, never trained on real people, grouping as the fine-tuned runs
 #             (connected components); zeroshotavg: the same with its packaged average-linkage grouping.
 # Every run keeps the checkpoint with the lowest validation loss; evaluation is the RESULTS.md protocol (test
@@ -37,6 +38,7 @@ train_one() {  # variant scene seed
   [ -f "$run/done" ] && return 0
   [ "$1" = pretrain ] && init=(--init "$INIT")
   [ "$1" = pretrainlow ] && init=(--init "$INIT" --lr 0.001)
+  [ "$1" = pretrainvlow ] && init=(--init "$INIT" --lr 0.0001)
   rm -rf "$run"
   "$py" -m predictor.cli train --threads 1 --backbone stgcnn --data "$data/$2" --out "$run" --epochs "$epochs" \
     --seed "$3" --eval-every 0 --quiet "${init[@]}" > "$run.log" 2>&1

@@ -4,7 +4,8 @@
   every simulated cell of the suite. `crowdnav-v1-train` is crowdnav-v1's 20 simulated cells (1 each) and
   crowdnav-tune's two recorded crowds, crowds_zara03 and uni_examples (5 each: a third of the episodes replay
   real people). Those two recordings lie outside every ETH/UCY test split; no test recording is ever trained on
-  (`check_recordings`).
+  (`check_recordings`). `crowdnav-v1-train-dense` adds the same recordings overlaid (`ReplayConfig.overlay`: 5 and
+  10 time-shifted copies superimposed), as dense as the univ test scene.
 - `Mix`: the cells' env configs, with one observation layout and reward weights for all (a run's settings), and the
   cycle that maps an episode seed to its cell: seed s plays cell `cycle[s % len(cycle)]` with reset seed s. The
   cycle holds each cell once per unit of weight, so any run of len(cycle) consecutive seeds (demonstrations, DAgger
@@ -28,10 +29,15 @@ import numpy as np
 
 from envs.config import CrowdNavConfig
 
-# (suite, cell, weight); cell "*": every simulated cell of the suite.
-MIXES: dict[str, tuple[tuple[str, str, int], ...]] = {
-    "crowdnav-v1-train": (("crowdnav-v1", "*", 1), ("crowdnav-tune", "tune-zara03", 5),
-                          ("crowdnav-tune", "tune-uni-examples", 5)),
+# (suite, cell, weight, overlay); cell "*": every simulated cell of the suite; overlay K > 1 (replay cells only):
+# the recording with K time-shifted copies superimposed (`ReplayConfig.overlay`), a crowd K times as dense.
+MIXES: dict[str, tuple[tuple[str, str, int, int], ...]] = {
+    "crowdnav-v1-train": (("crowdnav-v1", "*", 1, 1), ("crowdnav-tune", "tune-zara03", 5, 1),
+                          ("crowdnav-tune", "tune-uni-examples", 5, 1)),
+    # as dense as the univ test scene (median 34-49 people a frame) where crowdnav-v1-train's recordings have 3-6
+    "crowdnav-v1-train-dense": (("crowdnav-v1", "*", 1, 1), ("crowdnav-tune", "tune-zara03", 3, 1),
+                                ("crowdnav-tune", "tune-uni-examples", 2, 1), ("crowdnav-tune", "tune-zara03", 3, 5),
+                                ("crowdnav-tune", "tune-uni-examples", 5, 10)),
 }
 # The suites whose recordings are for choosing settings, not for reporting: their recordings may be trained on (at
 # seeds they do not report). Every other suite's recordings (the ETH/UCY test files) never are.
@@ -100,17 +106,30 @@ def check_compatible(cells: tuple[tuple[str, CrowdNavConfig], ...]) -> None:
                                  "cannot act in both")
 
 
-def _entries(name: str) -> list[tuple[str, str, int]]:
+def _entries(name: str) -> list[tuple[str, str, int, int]]:
     if name not in MIXES:
         raise ValueError(f"unknown mix {name!r}; valid: {', '.join(MIXES)}")
     from envs.evaluation.suite import load_suite
 
     out = []
-    for suite, cell, weight in MIXES[name]:
+    for suite, cell, weight, overlay in MIXES[name]:
         s = load_suite(suite)
         names = [c.name for c in s.cells if not c.is_real] if cell == "*" else [s.cell(cell).name]
-        out.extend((suite, n, weight) for n in names)
+        out.extend((suite, n, weight, overlay) for n in names)
     return out
+
+
+def _cell_config(suite: str, cell: str, overlay: int) -> CrowdNavConfig:
+    """The env config of a mix entry: the suite cell's, its recording overlaid `overlay` times."""
+    from envs.evaluation.suite import load_suite
+
+    c = load_suite(suite).cell(cell)
+    cfg = c.env_config(c.seeds[0])
+    if overlay == 1:
+        return cfg
+    if cfg.replay is None:
+        raise ValueError(f"mix cell {suite}/{cell}: overlay {overlay} needs a replay cell")
+    return replace(cfg, replay=replace(cfg.replay, overlay=overlay, name=f"{cfg.replay.name}-x{overlay}"))
 
 
 @lru_cache(maxsize=8)
@@ -119,16 +138,13 @@ def build_mix(name: str, observation: tuple[tuple[str, Any], ...] = (),
     """The mix `name` with this run's overrides of every cell's observation ((field of `ObservationConfig`, value),
     ...) and reward weights ((field of `RewardWeights`, value), ...). ValueError for an unknown name, a reported
     recording or cells that one agent cannot share."""
-    from envs.evaluation.suite import load_suite
-
     entries = _entries(name)
     cells, slots = [], []
-    for i, (suite, cell, weight) in enumerate(entries):
-        c = load_suite(suite).cell(cell)
-        cfg = c.env_config(c.seeds[0])
+    for i, (suite, cell, weight, overlay) in enumerate(entries):
+        cfg = _cell_config(suite, cell, overlay)
         cfg = replace(cfg, observation=replace(cfg.observation, **dict(observation)),
                       rewards=replace(cfg.rewards, **dict(rewards)))
-        label = f"{suite}/{cell}"
+        label = f"{suite}/{cell}" + (f"-x{overlay}" if overlay > 1 else "")
         check_recordings(label, cfg)
         cells.append((label, cfg))
         slots.extend(((j + 0.5) / weight, i) for j in range(weight))  # a cell's units spread over the cycle

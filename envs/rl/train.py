@@ -94,6 +94,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     """Behaviour cloning of the demo policy (demos from `demos_path`, or collected and saved to out/demos.npz),
     then for "dagger" `dagger_rounds` rounds of learner roll-outs labelled by the expert (seeds after the
     demos' own) and cloning on the aggregate (saved to out/dagger.npz)."""
+    from envs.policies.sb3_files import DECISION_KEY, save_agent
     from envs.rl.imitation import Demos, behaviour_clone, collect_demos, concat
 
     start, workers = time.perf_counter(), min(max(2, cfg.workers), os.cpu_count() or 2)
@@ -122,8 +123,12 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
         rounds.append({"learner_success": new.success_rate, "steps": len(demos.actions), "loss": losses[-1]})
         print(f"DAgger round {r + 1}: the learner succeeded in {new.success_rate:.2f} of its {cfg.dagger_episodes} "
               f"episodes; {len(demos.actions)} labelled steps, loss {losses[-1]:.3f}", flush=True)
-    if rounds:
+        # every round's labels and learner are kept: a stopped warm start loses at most one round (`--demos`
+        # out/dagger.npz continues from the labels; out/dagger_learner.zip is the learner cloned on them)
         demos.save(out / "dagger.npz")
+        save_agent(model, out / "dagger_learner.zip", cfg.env_config(),
+                   {"dagger_round": r + 1, "labels": len(demos.actions), "train_config": cfg.to_json(),
+                    DECISION_KEY: cfg.decision_every_steps, "wall_s": round(time.perf_counter() - start, 1)})
     info.update(bc_loss_last=losses[-1], dagger=rounds, warm_start_s=time.perf_counter() - start)
     return info
 

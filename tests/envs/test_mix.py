@@ -36,16 +36,19 @@ def test_the_training_mix_plays_every_simulated_cell_and_real_crowds_a_third_of_
 
 
 def test_a_mix_refuses_a_reported_recording_and_unknown_names(monkeypatch):
-    monkeypatch.setitem(mixmod.MIXES, "leaky", (("crowdnav-tune", "tune-zara03", 1), ("crowdnav-v1", "real-zara1", 1)))
+    monkeypatch.setitem(mixmod.MIXES, "leaky", (("crowdnav-tune", "tune-zara03", 1, 1), ("crowdnav-v1", "real-zara1", 1, 1)))
     build_mix.cache_clear()
     with pytest.raises(ValueError, match=r"real-zara1 replays .*crowds_zara01\.txt, which a benchmark suite reports"):
         build_mix("leaky")
     with pytest.raises(ValueError, match="unknown mix 'nope'; valid: crowdnav-v1-train"):
         build_mix("nope")
-    monkeypatch.setitem(mixmod.MIXES, "two-robots", (("crowdnav-v1", "circle-low-invisible", 1),
-                                                     ("crowdnav-classic", "*", 1)))
+    monkeypatch.setitem(mixmod.MIXES, "two-robots", (("crowdnav-v1", "circle-low-invisible", 1, 1),
+                                                     ("crowdnav-classic", "*", 1, 1)))
     with pytest.raises(ValueError, match="differ in robot"):
         build_mix("two-robots")
+    monkeypatch.setitem(mixmod.MIXES, "dense-sim", (("crowdnav-v1", "circle-low-invisible", 1, 3),))
+    with pytest.raises(ValueError, match="overlay 3 needs a replay cell"):
+        build_mix("dense-sim")
     build_mix.cache_clear()
 
 
