@@ -40,24 +40,16 @@ REPORTED = ("biwi_eth", "biwi_hotel", "students001", "students003", "crowds_zara
 
 
 def overlay_recording(path: str, copies: int, out_dir: Path = Path("/tmp/tune_overlay")) -> str:
-    """A denser, still disjoint tuning recording: `copies` circularly time-shifted copies of `path` superimposed.
+    """A denser, still disjoint tuning recording: `copies` circularly time-shifted copies of `path` superimposed
+    (the env's `envs.replay_overlay.overlay_rows`, as `ReplayConfig.overlay` replays it; before 2026-11-27 this
+    script had its own version with other ids, which the decision records of earlier runs used). Returns the path
+    of the written file (`<stem>_x<copies>.txt`)."""
+    from envs.replay import infer_frame_increment
+    from envs.replay_overlay import overlay_rows
+    from predictor.ethucy import read_trajectories
 
-    Copy j is shifted by j * duration / copies (wrapping round the end; a track cut by the wrap becomes two
-    tracks) and its pedestrian ids are offset by j * 100000. The copies do not avoid each other, like any
-    replay does not avoid the robot. Returns the path of the written file (`<stem>_x<copies>.txt`)."""
-    rows = np.loadtxt(path, ndmin=2)
-    frames = np.unique(rows[:, 0])
-    step = float(np.median(np.diff(frames)))
-    n_frames = len(frames)
-    index = np.searchsorted(frames, rows[:, 0])
-    parts = []
-    for j in range(copies):
-        shifted = (index + j * n_frames // copies) % n_frames
-        wrapped = shifted < index  # rows that wrapped round the end get new ids (the track is cut there)
-        ids = rows[:, 1] + j * 100000 + wrapped * 50000
-        parts.append(np.column_stack([frames[0] + shifted * step, ids, rows[:, 2], rows[:, 3]]))
-    merged = np.concatenate(parts)
-    merged = merged[np.lexsort((merged[:, 1], merged[:, 0]))]
+    rows = read_trajectories(path)
+    merged = overlay_rows(rows, copies, infer_frame_increment(rows[:, 0]))
     out_dir.mkdir(parents=True, exist_ok=True)
     out = out_dir / f"{Path(path).stem}_x{copies}.txt"
     np.savetxt(out, merged, fmt=["%.1f", "%.1f", "%.6f", "%.6f"], delimiter="\t")

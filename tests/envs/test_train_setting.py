@@ -235,6 +235,9 @@ def test_an_agent_trained_in_a_suite_cell_keeps_its_decision_period_in_the_bench
 
     demos = Demos.load(out / "dagger.npz")
     assert demos.decision_every_steps == 5 and min(demos.episode_seed) >= cfg.demo_seed
+    _, kept = read_agent(out / "dagger_learner.zip")  # each round's learner is kept with its labels
+    assert (kept["meta"]["dagger_round"], kept["meta"]["labels"]) == (1, len(demos.actions))
+    assert kept["meta"]["decision_every_steps"] == 5
     cell = load_suite("crowdnav-classic").cell("classic-circle5-invisible")
     record = run_task(EpisodeTask(cell.env_config(0), PolicyConfig(f"sb3:{out / 'final.zip'}"), 0,
                                   cell=cell.name))["record"]
