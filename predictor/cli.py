@@ -260,8 +260,12 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", choices=DEVICES, default="cpu",
                    help="where the model runs: auto = cuda when torch sees a GPU, else cpu (sampling stays on "
                         "the CPU, checkpoints hold CPU tensors)")
-    p.add_argument("--backbone", default=None, help="backbone name (sgcn, stgcnn)")
-    p.add_argument("--grouping", default=None, choices=["exact", "official", "ratio"])
+    p.add_argument("--backbone", default=None, help="backbone name (sgcn, stgcnn); default: train stgcnn, "
+                   "evaluate/predict the checkpoint's own")
+    p.add_argument("--grouping", default=None, choices=["exact", "official", "ratio"],
+                   help="hard groups from the learned pair distances: exact (connected components of the pairs within "
+                        "the threshold), official (the reference code's relabelling), ratio (fixed-ratio ablation); "
+                        "default: train exact, evaluate/predict the checkpoint's own")
 
 
 class OneLineParser(argparse.ArgumentParser):  # the same conventions as crowdsim.cli (no cross-package import)
@@ -291,12 +295,15 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     t = sub.add_parser("train", help="train on DATA/train, select by DATA/val loss")
     _common(t)
-    t.add_argument("--data", type=Path, required=True)
-    t.add_argument("--out", type=Path, required=True)
+    t.add_argument("--data", type=Path, required=True,
+                   help="a split folder with train/ and val/ ETH/UCY files, e.g. ../shared/datasets/eth_ucy/eth")
+    t.add_argument("--out", type=Path, required=True,
+                   help="run folder: best.pt (lowest validation loss), last.pt (for --resume), log.csv")
     t.add_argument("--no-groups", action="store_true", help="the backbone alone (no GP-Graph branches)")
-    t.add_argument("--epochs", type=int, default=TrainConfig.epochs)
-    t.add_argument("--batch-size", type=int, default=TrainConfig.batch_size)
-    t.add_argument("--lr", type=float, default=TrainConfig.lr)
+    t.add_argument("--epochs", type=int, default=TrainConfig.epochs, help="passes over the training windows")
+    t.add_argument("--batch-size", type=int, default=TrainConfig.batch_size, help="windows per optimiser step")
+    t.add_argument("--lr", type=float, default=TrainConfig.lr,
+                   help="Adam learning rate (halved at epochs 50 and 100)")
     t.add_argument("--bucket", type=int, default=TrainConfig.bucket, help="size-sorting chunk, in batches")
     t.add_argument("--max-pairs", type=int, default=None,
                    help="micro-batch budget B * N_max^2 (0: one pass per batch; default: the backbone's)")
@@ -304,7 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--rotate", action="store_true", help="random rotation augmentation")
     t.add_argument("--assigner", choices=ASSIGNERS, default="conv",
                    help="pair distance D: conv (GP-Graph's F_phi) or pairwise (predictor.pair_assigner)")
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--seed", type=int, default=0, help="initial weights, batch order and latent draws")
     t.add_argument("--max-windows", type=int, default=0, help="use only the first N windows (smoke tests)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     t.add_argument("--init", default="", metavar="CHECKPOINT",
@@ -318,27 +325,29 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("evaluate", help="ADE/FDE/COL/TCC (+ PW/G-MITRE) on DATA/test (or --split)")
     _common(e)
     e.add_argument("--checkpoint", required=True, help="checkpoint path or packaged name")
-    e.add_argument("--data", type=Path, required=True)
+    e.add_argument("--data", type=Path, required=True, help="a split folder (or a folder of ETH/UCY files)")
     e.add_argument("--split", choices=SPLITS, default="test",
                    help="which DATA/SPLIT folder to score (DATA itself when it has no such folder)")
     _group_calibration(e)
-    e.add_argument("--protocol", choices=PROTOCOLS, default="iid")
-    e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--trials", type=int, default=EvalConfig.trials)
-    e.add_argument("--samples", type=int, default=EvalConfig.n_samples)
+    e.add_argument("--protocol", choices=PROTOCOLS, default="iid",
+                   help="iid: independent latent draws; paper: the published code's KMeans-spread group latents")
+    e.add_argument("--seed", type=int, default=0, help="seeds the latent draws of all trials")
+    e.add_argument("--trials", type=int, default=EvalConfig.trials, help="repeats averaged (best-of-K each)")
+    e.add_argument("--samples", type=int, default=EvalConfig.n_samples, help="K of best-of-K ADE/FDE")
     e.add_argument("--pool-size", type=int, default=EvalConfig.pool_size,
                    help="KMeans latent sets precomputed for --protocol paper")
-    e.add_argument("--json", type=Path, default=None)
+    e.add_argument("--json", type=Path, default=None, help="also write the metrics to this JSON file")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=cmd_evaluate)
     r = sub.add_parser("predict", help="sample futures for an (8, N, 2) history saved with numpy")
     _common(r)
-    r.add_argument("--checkpoint", required=True)
+    r.add_argument("--checkpoint", required=True, help="checkpoint path or packaged name")
     r.add_argument("--history", type=Path, required=True, help=".npy file, shape (8, N, 2), metres")
     r.add_argument("--out", type=Path, required=True, help="output file, must end in .npz")
-    r.add_argument("--samples", type=int, default=20)
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None)
+    r.add_argument("--samples", type=int, default=20, help="futures K per pedestrian")
+    r.add_argument("--seed", type=int, default=0, help="latent draws")
+    r.add_argument("--sample-level", choices=["group", "scene", "pedestrian"], default=None,
+                   help="one latent per group (GP-Graph), per scene or per pedestrian; default: the model's")
     _group_calibration(r)
     r.set_defaults(func=cmd_predict)
     g = sub.add_parser("groups", help="grouping on real annotated people (validation): PW and G-MITRE of each "
