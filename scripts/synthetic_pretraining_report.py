@@ -5,8 +5,9 @@ five-scene average, and a paired comparison of `pretrain` against `real` over ev
 
 Reads `<variant>-<scene>-s<seed>-<protocol>.json` and `zeroshot[avg]-<scene>-<protocol>.json` (gpgraph evaluate).
 The paired test is an exact two-sided sign test on the per-pair FDE difference (no normality assumed).
-With every variant present it also chooses the fine-tuning lr per scene by leave-one-scene-out (the other four
-scenes' test FDE), so that no scene's choice sees its own test data.
+With two or more fine-tuning variants present for every scene (lr 0.01, 0.001, 0.0001, or none: zero-shot) it
+also chooses the fine-tuning lr per scene by leave-one-scene-out (the other four scenes' test FDE), so that no
+scene's choice sees its own test data, and prints the chosen family's five-scene average.
 
     python scripts/synthetic_pretraining_report.py best-seed out/synthetic_pretraining/val pretrainlow eth
 
@@ -24,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
-VARIANTS = ("real", "pretrain", "pretrainlow", "zeroshot", "zeroshotavg")
-NAME = re.compile(r"^(real|pretrain|pretrainlow|zeroshot|zeroshotavg)-(\w+?)(?:-s(\d+))?-(iid|paper)$")
+VARIANTS = ("real", "pretrain", "pretrainlow", "pretrainvlow", "zeroshot", "zeroshotavg")
+FINE_TUNED = ("pretrain", "pretrainlow", "pretrainvlow", "zeroshot")  # lr 0.01, 0.001, 0.0001, none (lr 0)
+NAME = re.compile(r"^(real|pretrain|pretrainlow|pretrainvlow|zeroshot|zeroshotavg)-(\w+?)(?:-s(\d+))?-(iid|paper)$")
 
 
 def load(folder: Path) -> dict[tuple[str, str, str], dict[int, tuple[float, float]]]:
@@ -72,7 +74,7 @@ def table(res: dict, protocol: str) -> list[str]:
                                  for k in seeds])
             avg = f"{per_seed[:, 0].mean():.3f}/{per_seed[:, 1].mean():.3f} ({len(seeds)})"
         lines.append(f"| {v} | " + " | ".join(row) + f" | {avg} |")
-    for variant in ("pretrain", "pretrainlow"):
+    for variant in FINE_TUNED[:3]:
         pairs = [(res[(variant, s, protocol)][k][1], res[("real", s, protocol)][k][1]) for s in SCENES
                  for k in sorted(set(res.get((variant, s, protocol), {})) & set(res.get(("real", s, protocol), {})))]
         if pairs:
@@ -83,26 +85,32 @@ def table(res: dict, protocol: str) -> list[str]:
     return [*lines, ""]
 
 
-def leave_one_scene_out(res: dict, protocol: str,
-                        candidates: tuple[str, ...] = ("pretrain", "pretrainlow")) -> list[str]:
-    """Choose the fine-tuning variant for each scene without its test data: the one with the lowest mean test FDE
-    over the other four scenes' splits (every seed). Then the chosen variant against `real` on the scene itself,
-    paired over (scene, seed)."""
+def leave_one_scene_out(res: dict, protocol: str, candidates: tuple[str, ...]) -> list[str]:
+    """Choose the fine-tuning lr for each scene without its test data: the candidate with the lowest mean test FDE
+    over the other four scenes' splits (every seed; `zeroshot` = no fine-tuning). Then the chosen family's
+    five-scene average (each scene: its chosen variant's mean over seeds) and, where `real` exists, the chosen
+    variant against `real` on the scene itself, paired over (scene, seed)."""
     lines = [f"### Leave-one-scene-out choice of the fine-tuning lr, protocol {protocol}", "",
              "| scene | " + " | ".join(f"{v}: FDE on the other scenes" for v in candidates)
-             + " | chosen | chosen FDE | real FDE |", "|---" * (len(candidates) + 4) + "|"]
-    diffs = []
+             + " | chosen | chosen ADE/FDE (seeds) |", "|---" * (len(candidates) + 3) + "|"]
+    diffs, family = [], []
     for scene in SCENES:
         others = {v: float(np.mean([f for o in SCENES if o != scene for _, f in res[(v, o, protocol)].values()]))
                   for v in candidates}
         chosen = min(candidates, key=others.get)
-        picked, real = res[(chosen, scene, protocol)], res[("real", scene, protocol)]
+        picked, real = res[(chosen, scene, protocol)], res.get(("real", scene, protocol), {})
         diffs += [picked[k][1] - real[k][1] for k in sorted(set(picked) & set(real))]
+        ade, fde = np.mean([a for a, _ in picked.values()]), np.mean([f for _, f in picked.values()])
+        family.append((ade, fde))
         lines.append(f"| {scene} | " + " | ".join(f"{others[v]:.3f}" for v in candidates) + f" | {chosen} | "
-                     f"{np.mean([f for _, f in picked.values()]):.3f} | {np.mean([f for _, f in real.values()]):.3f} |")
-    d = np.array(diffs)
-    return [*lines, "", f"chosen - real FDE over {len(d)} (scene, seed) pairs: mean {d.mean():+.4f} m, chosen better "
-                        f"in {(d < 0).sum()}, worse in {(d > 0).sum()}; sign test p = {sign_test(d):.3g}", ""]
+                     f"{ade:.3f}/{fde:.3f} ({len(picked)}) |")
+    avg = np.mean(family, axis=0)
+    lines += ["", f"the chosen family's five-scene average ADE/FDE: {avg[0]:.3f}/{avg[1]:.3f}"]
+    if diffs:
+        d = np.array(diffs)
+        lines.append(f"chosen - real FDE over {len(d)} (scene, seed) pairs: mean {d.mean():+.4f} m, chosen better "
+                     f"in {(d < 0).sum()}, worse in {(d > 0).sum()}; sign test p = {sign_test(d):.3g}")
+    return [*lines, ""]
 
 
 def best_seed(val_dir: Path, variant: str, scene: str) -> int:
@@ -133,9 +141,10 @@ def main(argv: list[str]) -> int:
     res = load(Path(argv[0]))
     for protocol in ("iid", "paper"):
         print("\n".join(table(res, protocol)))
-    if all((v, s, p) in res for v in ("real", "pretrain", "pretrainlow") for s in SCENES for p in ("iid", "paper")):
-        for protocol in ("iid", "paper"):
-            print("\n".join(leave_one_scene_out(res, protocol)))
+    for protocol in ("iid", "paper"):
+        candidates = tuple(v for v in FINE_TUNED if all((v, s, protocol) in res for s in SCENES))
+        if len(candidates) >= 2:
+            print("\n".join(leave_one_scene_out(res, protocol, candidates)))
     return 0
 
 
