@@ -21,9 +21,10 @@ Registry names:
                   settings"); other envs refuse it (robot model)
     ppo-crowdnav-20  the shipped PPO agent for CrowdNav++'s setting (suite crowdnav-plusplus: 20 ORCA humans who do
                   not see the robot, holonomic robot, 5 m sensor; acts every 0.25 s; same RESULTS section)
-    ppo-crowdnav-mix  a first generalist (`crowdnav train --mix crowdnav-v1-train`: crowdnav-v1's simulated cells and
-                  two recorded crowds outside every test split; 16 wall rays, which `crowdnav benchmark` gives it, and
-                  `crowdnav evaluate` with --wall-rays 16; acts every 0.2 s; RESULTS.md "RL: a generalist")
+    ppo-crowdnav-mix  a generalist (`crowdnav train --mix crowdnav-v1-train-dense`: crowdnav-v1's simulated cells and
+                  two recorded crowds outside every test split, also overlaid as dense crowds; 16 wall rays, which
+                  `crowdnav benchmark` gives it, and `crowdnav evaluate` with --wall-rays 16; acts every 0.2 s;
+                  RESULTS.md "RL, a generalist")
 
 Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.policies.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
