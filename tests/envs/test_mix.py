@@ -36,7 +36,8 @@ def test_the_training_mix_plays_every_simulated_cell_and_real_crowds_a_third_of_
 
 
 def test_a_mix_refuses_a_reported_recording_and_unknown_names(monkeypatch):
-    monkeypatch.setitem(mixmod.MIXES, "leaky", (("crowdnav-tune", "tune-zara03", 1, 1), ("crowdnav-v1", "real-zara1", 1, 1)))
+    monkeypatch.setitem(mixmod.MIXES, "leaky", (("crowdnav-tune", "tune-zara03", 1, 1),
+                                                ("crowdnav-v1", "real-zara1", 1, 1)))
     build_mix.cache_clear()
     with pytest.raises(ValueError, match=r"real-zara1 replays .*crowds_zara01\.txt, which a benchmark suite reports"):
         build_mix("leaky")
