@@ -12,7 +12,8 @@ of the base settings (``--base env``: the env's `ENV_MPC`; ``--base crowd``: `pl
 ``--variant base --variant slow:speed_cap_slope_per_s=0.6,speed_cap_min_mps=0.3``. ``weights.<name>=value``
 sets a cost weight. Tune only on recordings that are not reported (the defaults: crowds_zara03, uni_examples).
 Both are sparse (median 3-6 people per frame against 34-49 in the univ test scene); ``--overlay K`` superimposes
-K time-shifted copies of each for a dense tuning crowd (``overlay_recording``).
+K time-shifted copies of each for a dense tuning crowd (the env's ``ReplayConfig.overlay``; before 2026-11-27
+this script wrote its own overlaid files, with other ids, which the decision records of earlier runs used).
 
     .venv/bin/python scripts/tune_real_crowds.py --episodes 20 --variant base --variant crowd:@crowd
 """
@@ -37,23 +38,6 @@ DEFAULT_RECORDINGS = (DATA / "train/crowds_zara03_train.txt", DATA / "train/uni_
 POLICIES = ("mpc-gpgraph", "mpc-cv")
 TUNING_SUITE = "crowdnav-tune"  # its defaults (the same as crowdnav-v1's) set the episodes' rules
 REPORTED = ("biwi_eth", "biwi_hotel", "students001", "students003", "crowds_zara01", "crowds_zara02")
-
-
-def overlay_recording(path: str, copies: int, out_dir: Path = Path("/tmp/tune_overlay")) -> str:
-    """A denser, still disjoint tuning recording: `copies` circularly time-shifted copies of `path` superimposed
-    (the env's `envs.replay_overlay.overlay_rows`, as `ReplayConfig.overlay` replays it; before 2026-11-27 this
-    script had its own version with other ids, which the decision records of earlier runs used). Returns the path
-    of the written file (`<stem>_x<copies>.txt`)."""
-    from envs.replay import infer_frame_increment
-    from envs.replay_overlay import overlay_rows
-    from predictor.ethucy import read_trajectories
-
-    rows = read_trajectories(path)
-    merged = overlay_rows(rows, copies, infer_frame_increment(rows[:, 0]))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    out = out_dir / f"{Path(path).stem}_x{copies}.txt"
-    np.savetxt(out, merged, fmt=["%.1f", "%.1f", "%.6f", "%.6f"], delimiter="\t")
-    return str(out)
 
 
 def parse_variant(text: str) -> tuple[str, dict]:
@@ -92,9 +76,10 @@ _CACHE: dict = {}
 
 
 def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, base: str,
-                    predictor: str | None = None):
-    """The (config, env, policy) of a task, built once per process; predictor: mpc-gpgraph's (None: the env's)."""
-    key = (recording, policy, variant, predictor)
+                    predictor: str | None = None, overlay: int = 1):
+    """The (config, env, policy) of a task, built once per process; predictor: mpc-gpgraph's (None: the env's);
+    overlay: copies of the recording superimposed (`ReplayConfig.overlay`)."""
+    key = (recording, policy, variant, predictor, overlay)
     if key not in _CACHE:
         from envs.config import CrowdNavConfig
         from envs.env import CrowdNavEnv
@@ -105,7 +90,7 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
 
         defaults = load_suite(TUNING_SUITE).cells[0].defaults  # the suites' episode rules (time limit, spawns)
         cfg = CrowdNavConfig(scenario="replay", **defaults, replay=ReplayConfig(
-            path=recording, frame_step_s=0.4, min_remaining_s=float(defaults["time_limit_s"])))
+            path=recording, frame_step_s=0.4, min_remaining_s=float(defaults["time_limit_s"]), overlay=overlay))
         env = CrowdNavEnv(cfg)
         mpc_cfg = build_mpc_config(cfg.robot, overrides, base)
         if policy == "mpc-gpgraph":
@@ -132,7 +117,8 @@ def _collision_geometry(env) -> dict:
 
 
 def run_one(task: tuple) -> dict:
-    """One episode: (recording, policy, variant, overrides, base, seed[, predictor]) -> a flat record."""
+    """One episode: (recording, policy, variant, overrides, base, seed[, predictor[, overlay]]) -> a flat record;
+    its "recording" is the file's stem, with `_x<overlay>` when overlaid."""
     import torch
 
     from envs.evaluation.episode import run_episode
@@ -142,7 +128,9 @@ def run_one(task: tuple) -> dict:
     cfg, env, pol = _env_and_policy(recording, policy, variant, overrides, base, *rest)
     result = run_episode(cfg, pol.name, seed, env=env, policy=pol)
     m = result.metrics
-    rec = {"recording": Path(recording).stem, "policy": policy, "variant": variant, "seed": seed,
+    overlay = rest[1] if len(rest) > 1 else 1
+    label = Path(recording).stem + (f"_x{overlay}" if overlay > 1 else "")
+    rec = {"recording": label, "policy": policy, "variant": variant, "seed": seed,
            "outcome": m["outcome"], "collision_with": m["collision_with"], "kind": m["at_fault"],
            "steps": m["steps"],
            "min_distance_m": m["min_distance_m"], "fallbacks": m["fallbacks"], "times_ms": result.solve_times_ms}
@@ -206,10 +194,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.overlay < 1:
         print("--overlay must be >= 1", file=sys.stderr)
         return 2
-    if args.overlay > 1:
-        args.recordings = [overlay_recording(rec, args.overlay) for rec in args.recordings]
     variants = dict(parse_variant(v) for v in (args.variant or ["base"]))
-    tasks = [(rec, pol, name, ov, args.base, seed, args.predictor)
+    tasks = [(rec, pol, name, ov, args.base, seed, args.predictor, args.overlay)
              for rec in args.recordings for pol in args.policies for name, ov in variants.items()
              for seed in range(args.seed0, args.seed0 + args.episodes)]
     start = time.perf_counter()
