@@ -36,7 +36,7 @@ from envs.observation import build_observation, observation_space
 from envs.prediction import load_predictor_spec, predict
 from envs.rewards import StepFacts, reward_terms, weighted
 from envs.timing import DEFAULT_TIMING
-from envs.view import Decision, Pedestrians, PolicyView
+from envs.view import Decision, Pedestrians, PolicyView, action_command
 from planner import clip_control, model_dims, step_robot
 
 
@@ -250,15 +250,8 @@ class CrowdNavEnv(gym.Env):
         a0, a1 = float(a[0]), float(a[1])
         if not (math.isfinite(a0) and math.isfinite(a1)):
             raise ValueError(f"action must be finite, got {a}")
-        # np.clip(a, -1, 1) on floats (a bound wins a tie, as in numpy)
-        a0, a1 = ((x if x < 1.0 else 1.0) if x > -1.0 else -1.0 for x in (a0, a1))
         r = self.config.robot
-        if r.model == "unicycle":
-            lo, hi = -r.min_speed_mps, r.max_speed_mps
-            u = np.array([lo + (a0 + 1.0) * 0.5 * (hi - lo), a1 * r.max_yaw_rate_radps])
-        else:
-            u = np.array([a0 * r.max_speed_mps, a1 * r.max_speed_mps])
-        return clip_control(self.robot_state, u, self.config.dt_s, r)
+        return clip_control(self.robot_state, action_command(a0, a1, r), self.config.dt_s, r)
 
     def control_to_action(self, control: np.ndarray) -> np.ndarray:
         """The action (2,) float32 in [-1, 1] that asks for `control` (inverse of the scaling above)."""

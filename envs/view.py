@@ -85,3 +85,14 @@ class Decision:
     def annotated(self) -> bool:
         """Whether the decision carries annotations for the renderer."""
         return self.plan is not None or self.predictions is not None or self.predicted_group_id is not None
+
+
+def action_command(a0: float, a1: float, robot: RobotConfig) -> np.ndarray:
+    """The command (2,) an action (a0, a1) in [-1, 1]^2 asks for, before the acceleration limits (unicycle: speed
+    from -min_speed_mps to max_speed_mps, yaw rate +-max_yaw_rate_radps; holonomic: vx, vy +-max_speed_mps). Values
+    outside [-1, 1] are clipped (a bound wins a tie, as in numpy)."""
+    a0, a1 = ((x if x < 1.0 else 1.0) if x > -1.0 else -1.0 for x in (float(a0), float(a1)))
+    if robot.model == "unicycle":
+        lo, hi = -robot.min_speed_mps, robot.max_speed_mps
+        return np.array([lo + (a0 + 1.0) * 0.5 * (hi - lo), a1 * robot.max_yaw_rate_radps])
+    return np.array([a0 * robot.max_speed_mps, a1 * robot.max_speed_mps])

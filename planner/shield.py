@@ -151,21 +151,28 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     n_steps = max(1, int(round(cfg.shield_horizon_s / cfg.shield_dt_s)))
     planned = np.asarray(planned, float)
     cands = candidate_controls(cfg.robot, planned[0])
-    commands = np.repeat(cands[:, None], n_steps, axis=1)
-    commands[0] = plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)
-    robot_xy = rollout_candidates(state, commands, cfg.shield_dt_s, cfg.robot)
     futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, n_steps, cfg.shield_cv)
     near = within_reach(np.asarray(state, float)[:2], futures, radii, cfg)
     # walls: the MPC's wall margin while nobody is within reach, else the pedestrians' (see the module docstring)
     wall_slack = 0.0 if near.any() else cfg.shield_margin_m - (cfg.wall_clearance_m - cfg.robot.radius_m)
-    clear = clearances(robot_xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls, wall_slack)  # (C, K, T)
-    short = cfg.shield_margin_m - clear
-    hit = (short > 0).any(-1)  # (C, K [+1])
-    risk = hit[:, : len(futures) - has_cv].mean(-1)
-    if has_cv:  # the constant-velocity future must be avoided outright
-        risk = np.maximum(risk, hit[:, -1])  # (C,)
-    if risk[0] <= cfg.shield_max_risk:
-        return ShieldVerdict(cands[0].copy(), float(risk[0]), False, float(risk[0]))
+
+    def check(commands: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rollouts (c, T, 2), shortfalls below the margin (c, K [+1], T) and risks (c,) of commands (c, T, 2)."""
+        xy = rollout_candidates(state, commands, cfg.shield_dt_s, cfg.robot)
+        short = cfg.shield_margin_m - clearances(xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls,
+                                                 wall_slack)
+        hit = (short > 0).any(-1)  # (c, K [+1])
+        risk = hit[:, : len(futures) - has_cv].mean(-1)
+        if has_cv:  # the constant-velocity future must be avoided outright
+            risk = np.maximum(risk, hit[:, -1])
+        return xy, short, risk
+
+    # the plan alone first: when it passes (most steps), the grid of alternatives is never rolled out
+    xy0, short0, risk0 = check(plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)[None])
+    if risk0[0] <= cfg.shield_max_risk:
+        return ShieldVerdict(cands[0].copy(), float(risk0[0]), False, float(risk0[0]))
+    xy, short, risk = check(np.repeat(cands[1:, None], n_steps, axis=1))
+    robot_xy, short, risk = (np.concatenate(pair) for pair in ((xy0, xy), (short0, short), (risk0, risk)))
     weights = np.exp(-cfg.shield_dt_s * np.arange(1, n_steps + 1) / cfg.shield_tau_s)
     violation = (np.maximum(short, 0.0) * weights).sum(-1).mean(-1)
     scale = np.array([cfg.robot.max_speed_mps, cfg.robot.max_yaw_rate_radps if cfg.robot.model == "unicycle"

@@ -5,6 +5,7 @@
   gives the env action instead, for a Gym loop);
 - `plugins`: user policies (`module:factory`) and stable-baselines3 agents (`sb3:PATH.zip`);
 - `sb3_files`: SB3 agent files saved and loaded without unpickling, with the env's observation layout;
+- `shielded`: `NAME+shield`, any policy's decisions checked by the MPC's safety shield;
 - `identity`: what identifies a policy's weights in results (fingerprints for resuming);
 - `agents/`: the packaged agents (`ppo-crowdnav.zip`).
 

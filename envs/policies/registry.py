@@ -26,7 +26,10 @@ Registry names:
                   `crowdnav benchmark` gives it, and `crowdnav evaluate` with --wall-rays 16; acts every 0.2 s;
                   RESULTS.md "RL, a generalist")
 
-Besides these, `PolicyConfig.name` may be `module:factory` (a user policy, `envs.policies.plugins`) or `sb3:PATH.zip`
+Any of these but the MPC policies (whose planner shields already) may be followed by `+shield`
+(`ppo-crowdnav-mix+shield`): its decisions then pass the MPC's safety shield, on constant-velocity futures, before
+the env applies them (`envs.policies.shielded`). Besides these, `PolicyConfig.name` may be `module:factory` (a user
+policy, `envs.policies.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
 Every policy reads a `PolicyView` and returns a `Decision` (`envs.view`): `act(view) -> Decision`; it never
 calls back into the env. `act(policy, env)` below is the one loop step that asks the env for the view, applies
@@ -50,6 +53,7 @@ from envs.config import DEFAULT_PREDICTOR
 from envs.env import CrowdNavEnv
 from envs.factories import is_plugin, load_factory
 from envs.policies.plugins import SB3_PREFIX, SB3Policy
+from envs.policies.shielded import SHIELD_SUFFIX, ShieldedPolicy, split_shield
 from envs.prediction import load_predictor_spec, predict
 from envs.timing import PredictionTiming
 from envs.view import Decision, PolicyView
@@ -97,11 +101,12 @@ class PolicyConfig:
     deterministic: bool = True
 
     def __post_init__(self) -> None:
-        plug = is_plugin(self.name) or self.name.startswith(SB3_PREFIX)
-        if not plug and self.name not in POLICIES:
+        base, _ = split_shield(self.name)
+        plug = is_plugin(base) or base.startswith(SB3_PREFIX)
+        if not plug and base not in POLICIES:
             raise ValueError(f"unknown policy {self.name!r}; valid names: {', '.join(POLICIES)}, "
-                             "module:factory or sb3:PATH.zip")
-        if self.predictor is not None and not (self.name in PREDICTOR_POLICIES or is_plugin(self.name)):
+                             f"module:factory or sb3:PATH.zip, each optionally followed by {SHIELD_SUFFIX}")
+        if self.predictor is not None and not (base in PREDICTOR_POLICIES or is_plugin(base)):
             raise ValueError(f"policy {self.name!r} takes no predictor (only {', '.join(PREDICTOR_POLICIES)} "
                              "and module:factory policies do)")
         for key in ("replan_every_steps", "n_samples", "threads"):
@@ -356,6 +361,9 @@ def make_policy(spec: str | PolicyConfig, env: CrowdNavEnv) -> Policy:
         raise ValueError(f"predictor {cfg.predictor!r}: {SCENE_TEMPLATE} is filled in per cell by crowdnav "
                          "benchmark only; name one predictor here")
     env = env.unwrapped if hasattr(env, "unwrapped") else env
+    base, shielded = split_shield(cfg.name)
+    if shielded:
+        return ShieldedPolicy(make_policy(replace(cfg, name=base), env), replace(cfg.mpc, robot=env.config.robot))
     if cfg.name.startswith(SB3_PREFIX):
         return SB3Policy(cfg.name, env, cfg.deterministic, cfg.threads)
     if is_plugin(cfg.name):

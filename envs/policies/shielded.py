@@ -1,0 +1,90 @@
+"""`NAME+shield`: any policy's decision checked by the MPC's safety shield before the env applies it.
+
+A learned agent decides in about a millisecond but has no notion of a hard constraint: where its training did not
+cover a situation, it drives into people. The shield (`planner.shield`, the one `mpc-gpgraph` and `mpc-cv` run
+after their solve) is a cheap check of that decision, every env step:
+
+1. the wrapped policy decides (`Decision.action`, mapped to its command by `envs.view.action_command`, or
+   `Decision.control`);
+2. the command, held over ``shield_horizon_s``, is rolled out with the robot's limits and checked against the
+   pedestrians' constant-velocity futures (from the last two 0.4 s rows of `view.history`, the future `mpc-cv`
+   plans with) and the walls;
+3. if it comes closer than ``shield_margin_m`` to someone (the constant-velocity future counts as certain) or
+   touches a wall, the shield replaces it by the constant command (a grid of speed x yaw rate) with the least
+   time-discounted violation; otherwise the wrapped policy's decision goes to the env unchanged (its action,
+   bit for bit).
+
+The settings are `PolicyConfig.mpc`'s shield fields (`CROWD_MPC` by default: 1.6 s look-ahead, 0.15 m margin,
+checked every 0.1 s), with the env's robot. `stats` counts the decisions (`calls`) and the replaced ones
+(`shielded`), and times each whole decision (the wrapped policy and the shield). A policy whose own planner
+already shields (the registry's MPC policies) is refused: the second shield would only repeat the first.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from envs.view import Decision, PolicyView, action_command
+from planner import MPCConfig, PlanStats, constant_velocity_prediction, empty_prediction
+from planner.shield import shield_control
+
+SHIELD_SUFFIX = "+shield"
+SELF_SHIELDED = ("mpc-gpgraph", "mpc-oracle", "mpc-oracle-paths", "mpc-oracle-groups", "mpc-cv", "mpc-none")
+
+
+def split_shield(name: str) -> tuple[str, bool]:
+    """(the wrapped policy's name, whether `name` asks for the shield). ValueError for a name the suffix cannot
+    apply to (nothing before it, twice, or a policy whose planner already shields)."""
+    if not name.endswith(SHIELD_SUFFIX):
+        return name, False
+    base = name[: -len(SHIELD_SUFFIX)]
+    if not base or base.endswith(SHIELD_SUFFIX):
+        raise ValueError(f"policy {name!r}: {SHIELD_SUFFIX} follows one policy name, once")
+    if base in SELF_SHIELDED:
+        raise ValueError(f"policy {name!r}: {base} already runs the shield after its solve "
+                         f"({SHIELD_SUFFIX} wraps the other policies)")
+    return base, True
+
+
+class ShieldedPolicy:
+    """`inner` with every decision checked by the safety shield of `config` (see the module docstring)."""
+
+    reads_history = True  # the constant-velocity futures come from the history window
+
+    def __init__(self, inner: Any, config: MPCConfig) -> None:
+        if config.shield_horizon_s <= 0:
+            raise ValueError("the shield needs MPCConfig.shield_horizon_s > 0 (0 turns it off)")
+        self.inner, self.config = inner, config
+        self.name = f"{inner.name}{SHIELD_SUFFIX}"
+        self.stats = PlanStats()
+        self._previous: np.ndarray | None = None
+
+    def reset(self, seed: int | None = None) -> None:
+        self.inner.reset(seed)
+        self._previous = None
+
+    def act(self, view: PolicyView) -> Decision:
+        start = time.perf_counter()
+        decision = self.inner.act(view)
+        command = decision.control if decision.control is not None else action_command(*decision.action, view.robot)
+        verdict = shield_control(view.robot_state, np.asarray(command, float)[None], cv_prediction(view), view.walls,
+                                 self.config, self._previous)
+        self._previous = verdict.control.copy() if verdict.replaced else None
+        self.stats.counts["calls"] += 1
+        self.stats.counts["shielded"] += int(verdict.replaced)
+        self.stats.solve_times_s.append(time.perf_counter() - start)
+        if not verdict.replaced:
+            return decision
+        return Decision(control=verdict.control, plan=decision.plan, predictions=decision.predictions,
+                        predicted_group_id=decision.predicted_group_id)
+
+
+def cv_prediction(view: PolicyView):
+    """The pedestrians' constant-velocity futures (1, pred_len, N, 2) from `view.history`, as a `PedPrediction`."""
+    p, t = view.pedestrians, view.timing
+    if len(p.pos) == 0 or view.history is None:
+        return empty_prediction(t.pred_len, t.step_s)
+    return constant_velocity_prediction(view.history, p.radius, n_steps=t.pred_len, step_s=t.step_s)
