@@ -14,6 +14,10 @@ of each p50 and p95 to mpc-gpgraph's.
     python bench/bench_policy_latency.py --quick      # 2 episodes per policy
     python bench/bench_policy_latency.py --suite crowdnav-plusplus
     python bench/bench_policy_latency.py --suite crowdnav-v1 --cell crossing-high-visible
+    python bench/bench_policy_latency.py --suite crowdnav-v1 --agent ppo-crowdnav-mix ppo-crowdnav-mix+shield
+
+A shielded agent (`NAME+shield`) decides every env step (the shield checks the held action each step), so all
+its steps are timed; the network runs at its period inside them.
 """
 
 from __future__ import annotations
@@ -68,13 +72,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--suite", choices=sorted(AGENTS), default="crowdnav-classic", help="the setting and its agent")
     ap.add_argument("--cell", default=None, help="the suite's cell (default: crowdnav-v1 corridor-high-visible, "
                                                    "else the suite's first)")
-    ap.add_argument("--agent", default=None, help="the agent (registry name or sb3:PATH.zip; default: the suite's)")
+    ap.add_argument("--agent", nargs="+", default=None,
+                    help="the agents (registry names or sb3:PATH.zip, each optionally NAME+shield; default: the "
+                         "suite's)")
     args = ap.parse_args(argv)
     set_threads(1)
     episodes = 2 if args.quick else 10
     cell = args.cell or CELLS.get(args.suite) or load_suite(args.suite).cells[0].name
     rows = {name: decision_times(args.suite, cell, name, episodes) * 1e3
-            for name in (args.agent or AGENTS[args.suite], "mpc-cv", "mpc-gpgraph")}
+            for name in (*(args.agent or [AGENTS[args.suite]]), "mpc-cv", "mpc-gpgraph")}
     ref = rows["mpc-gpgraph"]
     print(f"{args.suite} {cell}, {episodes} episodes per policy (seeds {SEED0}+), one thread; "
           f"{platform.processor() or 'cpu'}, Python {platform.python_version()}")
