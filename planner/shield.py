@@ -77,12 +77,36 @@ def candidate_controls(robot: RobotConfig, preferred: np.ndarray) -> np.ndarray:
 def rollout_candidates(state: np.ndarray, commands: np.ndarray, dt_s: float, robot: RobotConfig) -> np.ndarray:
     """Robot positions (C, T, 2) at +dt_s .. +T dt_s applying commands (C, T, 2) in turn, each clipped to the
     acceleration bounds, from ``state`` (state_dim,)."""
+    if robot.model == "unicycle":
+        return _rollout_unicycle(np.asarray(state, float), np.asarray(commands, float), dt_s, robot)
     x = np.tile(np.asarray(state, float), (len(commands), 1))
     out = []
     for k in range(commands.shape[1]):
         x = step_numpy(x, clip_control(x, commands[:, k], dt_s, robot), dt_s, robot.model)
         out.append(x[:, :2])
     return np.stack(out, axis=1)
+
+
+def _rollout_unicycle(state: np.ndarray, commands: np.ndarray, dt_s: float, robot: RobotConfig) -> np.ndarray:
+    """`rollout_candidates` for the unicycle: the float operations of `clip_control` and `step_numpy` in the same
+    order (so bit-identical), on the pose's components instead of stacked states: fewer numpy calls per step."""
+    c, n_steps = commands.shape[:2]
+    px, py, th = (np.full(c, state[i]) for i in range(3))
+    vel = np.tile(state[3:5], (c, 1))
+    accel = np.array([robot.max_accel_mps2, robot.max_yaw_accel_radps2]) * dt_s
+    lo = np.array([-robot.min_speed_mps, -robot.max_yaw_rate_radps])
+    hi = np.array([robot.max_speed_mps, robot.max_yaw_rate_radps])
+    out = np.empty((c, n_steps, 2))
+    for k in range(n_steps):
+        vel = np.clip(vel + np.clip(commands[:, k] - vel, -accel, accel), lo, hi)
+        half = vel[:, 1] * dt_s / 2
+        dist = vel[:, 0] * dt_s * np.sinc(half / np.pi)
+        heading = th + half
+        px = px + dist * np.cos(heading)
+        py = py + dist * np.sin(heading)
+        th = th + vel[:, 1] * dt_s
+        out[:, k, 0], out[:, k, 1] = px, py
+    return out
 
 
 def plan_commands(planned: np.ndarray, plan_dt_s: float, dt_s: float, n_steps: int) -> np.ndarray:
@@ -122,9 +146,10 @@ def within_reach(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, c
 
 
 def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, robot_radius: float,
-               walls: np.ndarray | None, wall_slack_m: float = 0.0) -> np.ndarray:
+               walls: np.ndarray | None, wall_slack_m: float = 0.0, wall_m: np.ndarray | None = None) -> np.ndarray:
     """Smallest clearance (m) to any pedestrian or wall: robot (C, T, 2), futures (K, T, n, 2) -> (C, K, T). A wall's
-    clearance counts `wall_slack_m` more (the shield's margin minus the MPC's wall margin: a wall is where it is)."""
+    clearance counts `wall_slack_m` more (the shield's margin minus the MPC's wall margin: a wall is where it is).
+    `wall_m` (C, T): the centre's distance to the nearest wall, when already computed (`wall_clearance`)."""
     c, t = robot_xy.shape[:2]
     if futures.shape[2]:
         dx = robot_xy[:, None, :, None, 0] - futures[None, ..., 0]  # (C, K, T, n)
@@ -132,7 +157,7 @@ def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, rob
         ped = (np.sqrt(dx * dx + dy * dy) - radii).min(-1) - robot_radius
     else:
         ped = np.full((c, max(futures.shape[0], 1), t), np.inf)
-    wall = wall_clearance(robot_xy, walls) - robot_radius + wall_slack_m
+    wall = (wall_clearance(robot_xy, walls) if wall_m is None else wall_m) - robot_radius + wall_slack_m
     return np.minimum(ped, wall[:, None, :])
 
 
@@ -157,22 +182,23 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     wall_slack = 0.0 if near.any() else cfg.shield_margin_m - (cfg.wall_clearance_m - cfg.robot.radius_m)
 
     def check(commands: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rollouts (c, T, 2), shortfalls below the margin (c, K [+1], T) and risks (c,) of commands (c, T, 2)."""
+        """Wall distances (c, T), shortfalls below the margin (c, K [+1], T) and risks (c,) of commands (c, T, 2)."""
         xy = rollout_candidates(state, commands, cfg.shield_dt_s, cfg.robot)
+        wall_m = wall_clearance(xy, walls)
         short = cfg.shield_margin_m - clearances(xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls,
-                                                 wall_slack)
+                                                 wall_slack, wall_m)
         hit = (short > 0).any(-1)  # (c, K [+1])
         risk = hit[:, : len(futures) - has_cv].mean(-1)
         if has_cv:  # the constant-velocity future must be avoided outright
             risk = np.maximum(risk, hit[:, -1])
-        return xy, short, risk
+        return wall_m, short, risk
 
     # the plan alone first: when it passes (most steps), the grid of alternatives is never rolled out
-    xy0, short0, risk0 = check(plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)[None])
+    wall0, short0, risk0 = check(plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)[None])
     if risk0[0] <= cfg.shield_max_risk:
         return ShieldVerdict(cands[0].copy(), float(risk0[0]), False, float(risk0[0]))
-    xy, short, risk = check(np.repeat(cands[1:, None], n_steps, axis=1))
-    robot_xy, short, risk = (np.concatenate(pair) for pair in ((xy0, xy), (short0, short), (risk0, risk)))
+    wall_m, short, risk = check(np.repeat(cands[1:, None], n_steps, axis=1))
+    wall_m, short, risk = (np.concatenate(pair) for pair in ((wall0, wall_m), (short0, short), (risk0, risk)))
     weights = np.exp(-cfg.shield_dt_s * np.arange(1, n_steps + 1) / cfg.shield_tau_s)
     violation = (np.maximum(short, 0.0) * weights).sum(-1).mean(-1)
     scale = np.array([cfg.robot.max_speed_mps, cfg.robot.max_yaw_rate_radps if cfg.robot.model == "unicycle"
@@ -180,6 +206,6 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     cost = violation + DEVIATION_WEIGHT * (((cands - cands[0]) / scale) ** 2).sum(-1)
     if previous is not None and cfg.shield_hold_weight > 0:
         cost = cost + cfg.shield_hold_weight * np.sqrt((((cands - previous) / scale) ** 2).sum(-1))
-    cost = cost + WALL_CONTACT_COST * touches_wall(robot_xy, walls, cfg.robot.radius_m)
+    cost = cost + WALL_CONTACT_COST * (wall_m < cfg.robot.radius_m).any(-1)  # `touches_wall`
     best = int(np.argmin(cost))
     return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))
