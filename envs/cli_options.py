@@ -18,7 +18,7 @@ from envs.config import DEFAULT_PREDICTOR
 from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
-from envs.policies.shielded import split_shield
+from envs.policies.wrappers import base_name, split_wrappers
 from planner import LaneConfig, RouteConfig, SpaceTimeConfig
 
 if TYPE_CHECKING:
@@ -54,8 +54,8 @@ OBSERVATION_POLICIES = ("ppo-crowdnav", "ppo-crowdnav-classic", "ppo-crowdnav-20
 def flags_read(name: str) -> tuple[str, ...]:
     """The policy flags the policy `name` reads: a registry policy's `POLICY_FLAGS`, an SB3 agent's `SB3_FLAGS`,
     and every flag for any other name (a `module:factory` plug-in; `PolicyConfig` rejects what is neither)."""
-    base, shielded = split_shield(name)
-    if shielded:  # the shield reads its settings from --mpc
+    base, wrappers = split_wrappers(name)
+    if wrappers:  # the route and the shield read their settings from --mpc
         return tuple(dict.fromkeys((*flags_read(base), "--mpc")))
     if name in POLICY_FLAGS:
         return POLICY_FLAGS[name]
@@ -65,7 +65,7 @@ def flags_read(name: str) -> tuple[str, ...]:
 def reads_observation(name: str) -> bool:
     """Whether the policy acts on the env's observation (so that --wall-rays can matter to it): an SB3 agent, a
     plug-in or one of `OBSERVATION_POLICIES`."""
-    name = split_shield(name)[0]
+    name = base_name(name)
     return name not in POLICY_FLAGS or name in OBSERVATION_POLICIES
 
 
@@ -86,8 +86,8 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
     p.add_argument("--policy", nargs="+", action="extend", required=required, metavar="NAME",
                    help="one or more (repeatable) of: " + ", ".join(POLICIES)
                    + ", module:factory (a Policy plug-in) or sb3:PATH.zip (a stable-baselines3 agent); any but the "
-                   "mpc-* policies may end in +shield (its decisions checked by the MPC's safety shield, settings "
-                   "from --mpc shield_*)")
+                   "mpc-* policies may end in +route (it heads for the global route's subgoal through walls) and/or "
+                   "+shield (its decisions checked by the MPC's safety shield; settings from --mpc route=, shield_*)")
     p.add_argument("--predictor", default=None, metavar="NAME",
                    help="for mpc-gpgraph and plug-in policies: predictor name, checkpoint path or module:factory "
                    f"(default: the shipped {DEFAULT_PREDICTOR})")

@@ -5,7 +5,8 @@
   gives the env action instead, for a Gym loop);
 - `plugins`: user policies (`module:factory`) and stable-baselines3 agents (`sb3:PATH.zip`);
 - `sb3_files`: SB3 agent files saved and loaded without unpickling, with the env's observation layout;
-- `shielded`: `NAME+shield`, any policy's decisions checked by the MPC's safety shield;
+- `wrappers`, `routed`, `shielded`: the suffixes `NAME+route` (heads for the global route's subgoal) and
+  `NAME+shield` (decisions checked by the MPC's safety shield), for any policy but the MPC's;
 - `identity`: what identifies a policy's weights in results (fingerprints for resuming);
 - `agents/`: the packaged agents (`ppo-crowdnav.zip`).
 

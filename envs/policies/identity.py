@@ -16,7 +16,7 @@ from typing import Any
 from envs.factories import is_plugin
 from envs.policies import AGENTS_DIR, DEFAULT_PREDICTOR, POLICIES, PREDICTOR_POLICIES, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX, parse_sb3
-from envs.policies.shielded import split_shield
+from envs.policies.wrappers import base_name
 from predictor.checkpoints import checkpoint_file  # torch-free
 from predictor.group_rules import split_group_rule  # torch-free
 
@@ -25,7 +25,7 @@ def artifact_files(cfg: PolicyConfig) -> list[Path]:
     """The weight files `make_policy(cfg)` loads: the predictor's checkpoint (mpc-gpgraph, plug-in policies
     given a predictor), the packaged agent of a registry agent policy, or the `sb3:` file. Names that are no
     file (constant velocity, a typo) give none here; loading them fails later, with its own message."""
-    cfg = replace(cfg, name=split_shield(cfg.name)[0])  # NAME+shield loads NAME's files
+    cfg = replace(cfg, name=base_name(cfg.name))  # NAME+route+shield loads NAME's files
     files: list[Path | None] = []
     predictor = cfg.predictor if cfg.predictor is not None else \
         DEFAULT_PREDICTOR if cfg.name in PREDICTOR_POLICIES else None
@@ -75,7 +75,7 @@ def agent_wall_rays(cfg: PolicyConfig) -> int:
     from envs.policies.sb3_files import read_agent, saved_signature
 
     files = [f for f in artifact_files(cfg) if f.suffix == ".zip"]
-    cfg = replace(cfg, name=split_shield(cfg.name)[0])
+    cfg = replace(cfg, name=base_name(cfg.name))
     if not files or not (cfg.name.startswith(SB3_PREFIX) or cfg.name in POLICIES):
         return 0
     try:

@@ -26,9 +26,10 @@ Registry names:
                   `crowdnav benchmark` gives it, and `crowdnav evaluate` with --wall-rays 16; acts every 0.2 s;
                   RESULTS.md "RL, a generalist")
 
-Any of these but the MPC policies (whose planner shields already) may be followed by `+shield`
-(`ppo-crowdnav-mix+shield`): its decisions then pass the MPC's safety shield, on constant-velocity futures, before
-the env applies them (`envs.policies.shielded`). Besides these, `PolicyConfig.name` may be `module:factory` (a user
+Any of these but the MPC policies (whose planner routes and shields already) may be followed by `+route` (it heads
+for the global route's subgoal through the walls, `envs.policies.routed`) and `+shield` (its decisions pass the MPC's
+safety shield, on constant-velocity futures, before the env applies them, `envs.policies.shielded`), in that order:
+`ppo-crowdnav-mix+route+shield`. Besides these, `PolicyConfig.name` may be `module:factory` (a user
 policy, `envs.policies.plugins`) or `sb3:PATH.zip`
 (a stable-baselines3 agent), and `PolicyConfig.predictor` a predictor name, checkpoint or `module:factory`.
 Every policy reads a `PolicyView` and returns a `Decision` (`envs.view`): `act(view) -> Decision`; it never
@@ -53,7 +54,9 @@ from envs.config import DEFAULT_PREDICTOR
 from envs.env import CrowdNavEnv
 from envs.factories import is_plugin, load_factory
 from envs.policies.plugins import SB3_PREFIX, SB3Policy
-from envs.policies.shielded import SHIELD_SUFFIX, ShieldedPolicy, split_shield
+from envs.policies.routed import RoutedPolicy
+from envs.policies.shielded import ShieldedPolicy
+from envs.policies.wrappers import ROUTE_SUFFIX, SHIELD_SUFFIX, split_wrappers
 from envs.prediction import load_predictor_spec, predict
 from envs.timing import PredictionTiming
 from envs.view import Decision, PolicyView
@@ -101,11 +104,12 @@ class PolicyConfig:
     deterministic: bool = True
 
     def __post_init__(self) -> None:
-        base, _ = split_shield(self.name)
+        base, _ = split_wrappers(self.name)
         plug = is_plugin(base) or base.startswith(SB3_PREFIX)
         if not plug and base not in POLICIES:
             raise ValueError(f"unknown policy {self.name!r}; valid names: {', '.join(POLICIES)}, "
-                             f"module:factory or sb3:PATH.zip, each optionally followed by {SHIELD_SUFFIX}")
+                             f"module:factory or sb3:PATH.zip, each optionally followed by {ROUTE_SUFFIX} and/or "
+                             f"{SHIELD_SUFFIX}")
         if self.predictor is not None and not (base in PREDICTOR_POLICIES or is_plugin(base)):
             raise ValueError(f"policy {self.name!r} takes no predictor (only {', '.join(PREDICTOR_POLICIES)} "
                              "and module:factory policies do)")
@@ -361,9 +365,12 @@ def make_policy(spec: str | PolicyConfig, env: CrowdNavEnv) -> Policy:
         raise ValueError(f"predictor {cfg.predictor!r}: {SCENE_TEMPLATE} is filled in per cell by crowdnav "
                          "benchmark only; name one predictor here")
     env = env.unwrapped if hasattr(env, "unwrapped") else env
-    base, shielded = split_shield(cfg.name)
-    if shielded:
-        return ShieldedPolicy(make_policy(replace(cfg, name=base), env), replace(cfg.mpc, robot=env.config.robot))
+    base, wrappers = split_wrappers(cfg.name)
+    if wrappers:
+        policy, mpc = make_policy(replace(cfg, name=base), env), replace(cfg.mpc, robot=env.config.robot)
+        for suffix in wrappers:
+            policy = RoutedPolicy(policy, mpc, env) if suffix == ROUTE_SUFFIX else ShieldedPolicy(policy, mpc)
+        return policy
     if cfg.name.startswith(SB3_PREFIX):
         return SB3Policy(cfg.name, env, cfg.deterministic, cfg.threads)
     if is_plugin(cfg.name):

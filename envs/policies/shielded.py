@@ -17,7 +17,7 @@ after their solve) is a cheap check of that decision, every env step:
 The settings are `PolicyConfig.mpc`'s shield fields (`CROWD_MPC` by default: 1.6 s look-ahead, 0.15 m margin,
 checked every 0.1 s), with the env's robot. `stats` counts the decisions (`calls`) and the replaced ones
 (`shielded`), and times each whole decision (the wrapped policy and the shield). A policy whose own planner
-already shields (the registry's MPC policies) is refused: the second shield would only repeat the first.
+already shields (the registry's MPC policies) is refused (`envs.policies.wrappers`).
 """
 
 from __future__ import annotations
@@ -27,26 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from envs.policies.wrappers import SHIELD_SUFFIX
 from envs.view import Decision, PolicyView, action_command
 from planner import MPCConfig, PlanStats, constant_velocity_prediction, empty_prediction
 from planner.shield import shield_control
-
-SHIELD_SUFFIX = "+shield"
-SELF_SHIELDED = ("mpc-gpgraph", "mpc-oracle", "mpc-oracle-paths", "mpc-oracle-groups", "mpc-cv", "mpc-none")
-
-
-def split_shield(name: str) -> tuple[str, bool]:
-    """(the wrapped policy's name, whether `name` asks for the shield). ValueError for a name the suffix cannot
-    apply to (nothing before it, twice, or a policy whose planner already shields)."""
-    if not name.endswith(SHIELD_SUFFIX):
-        return name, False
-    base = name[: -len(SHIELD_SUFFIX)]
-    if not base or base.endswith(SHIELD_SUFFIX):
-        raise ValueError(f"policy {name!r}: {SHIELD_SUFFIX} follows one policy name, once")
-    if base in SELF_SHIELDED:
-        raise ValueError(f"policy {name!r}: {base} already runs the shield after its solve "
-                         f"({SHIELD_SUFFIX} wraps the other policies)")
-    return base, True
 
 
 class ShieldedPolicy:

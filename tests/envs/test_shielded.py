@@ -1,4 +1,4 @@
-"""`NAME+shield`: the MPC's safety shield around any policy's decisions."""
+"""`NAME+shield` and `NAME+route`: the MPC's safety shield and global route around any policy."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from envs import CrowdNavEnv
 from envs.cli_options import flags_read, reads_observation
 from envs.policies import PolicyConfig, decide, make_policy
 from envs.policies.identity import artifact_files, policy_identity
-from envs.policies.shielded import ShieldedPolicy, split_shield
+from envs.policies.shielded import ShieldedPolicy
+from envs.policies.wrappers import split_wrappers
 from envs.replay import ReplayConfig
 from envs.view import Decision, action_command
 from planner import CROWD_MPC, MPCConfig, RobotConfig
@@ -89,9 +90,11 @@ def test_action_command_is_the_env_scaling():
 
 
 def test_names_configs_and_files():
-    assert split_shield("ppo-crowdnav-mix+shield") == ("ppo-crowdnav-mix", True)
-    assert split_shield("ppo-crowdnav-mix") == ("ppo-crowdnav-mix", False)
-    for bad in ("+shield", "random+shield+shield", "mpc-cv+shield", "mpc-gpgraph+shield"):
+    assert split_wrappers("ppo-crowdnav-mix+shield") == ("ppo-crowdnav-mix", ("+shield",))
+    assert split_wrappers("ppo-crowdnav-mix+route+shield") == ("ppo-crowdnav-mix", ("+route", "+shield"))
+    assert split_wrappers("ppo-crowdnav-mix") == ("ppo-crowdnav-mix", ())
+    for bad in ("+shield", "random+shield+shield", "mpc-cv+shield", "mpc-gpgraph+shield", "random+shield+route",
+                "mpc-cv+route"):
         with pytest.raises(ValueError):
             PolicyConfig(bad)
     with pytest.raises(ValueError, match="unknown policy"):
@@ -112,3 +115,65 @@ def test_make_policy_wraps_and_refuses_a_shield_turned_off():
 
     with pytest.raises(ValueError, match="shield_horizon_s"):
         make_policy(PolicyConfig("random+shield", mpc=replace(CROWD_MPC, shield_horizon_s=0.0)), env)
+
+
+class Probe:
+    """Records every view it is handed; stands still."""
+
+    name = "probe"
+    reads_history = False
+
+    def __init__(self) -> None:
+        self.views = []
+
+    def reset(self, seed: int | None = None) -> None:
+        self.views = []
+
+    def act(self, view) -> Decision:
+        self.views.append(view)
+        return Decision(action=np.array([-1.0, 0.0], np.float32))
+
+
+def _door_env() -> CrowdNavEnv:
+    from envs.evaluation.suite import load_suite
+
+    cell = load_suite("crowdnav-tune").cell("tune-door-low-visible")
+    env = CrowdNavEnv(cell.env_config(1002))
+    env.reset(seed=1002)  # robot in the room at (5.6, 5.7), goal beyond the door at (11, 3.5)
+    return env
+
+
+def test_route_gives_the_policy_a_subgoal_it_can_see_through_the_door():
+    from envs.observation import build_observation
+    from envs.policies.routed import RoutedPolicy
+    from planner.route import in_sight
+
+    env = _door_env()
+    cfg = _shield_config(env)
+    goal, here = env.goal.copy(), env.robot_state[:2].copy()
+    walls = env.view().walls
+    assert not in_sight(here, goal[None], walls, cfg.wall_clearance_m, 0.1)[0]  # the goal is behind the wall
+    probe = Probe()
+    routed = RoutedPolicy(probe, cfg, env)
+    routed.reset(0)
+    routed.act(env.view())
+    seen = probe.views[-1]
+    assert not np.array_equal(seen.goal, goal) and np.array_equal(env.goal, goal)  # the env keeps the real goal
+    assert in_sight(here, seen.goal[None], walls, cfg.wall_clearance_m, 0.1)[0]
+    expected = build_observation(env.config, env.observation_space, env.robot_state, seen.goal, 1.0, np.zeros((0, 2)),
+                                 np.zeros((0, 2)), np.zeros(0), np.zeros(0, int), None, walls)["robot"]
+    assert np.allclose(seen.obs["robot"][:3], expected[:3], atol=1e-5)
+    assert np.array_equal(seen.obs["robot"][3:], env.view().obs["robot"][3:])  # speed, radius, time left unchanged
+    assert routed.name == "probe+route"
+
+
+def test_route_without_walls_passes_the_view_unchanged():
+    from envs.policies.routed import RoutedPolicy
+
+    env = CrowdNavEnv()
+    env.reset(seed=0)
+    probe = Probe()
+    routed = RoutedPolicy(probe, _shield_config(env), env)
+    view = env.view()
+    routed.act(view)
+    assert probe.views[-1] is view
