@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from planner_helpers import PRED, STEP_S, make_config
 
-from planner import MPCConfig, MPCPlanner, PedPrediction, constant_velocity_prediction
+from planner import MPCConfig, MPCPlanner, PedPrediction, RobotConfig, constant_velocity_prediction
 from planner.dynamics import clip_control, step_numpy
 from planner.shield import clearances, rollout_candidates, shield_control
 
@@ -205,3 +205,26 @@ def test_the_shield_holds_walls_to_the_mpcs_wall_margin_so_the_robot_goes_throug
     assert _min_clearance(state, go[0], near, cfg) > cfg.shield_margin_m
     crowded = shield_control(state, go, near, walls, cfg)
     assert crowded.replaced and crowded.risk == 1.0
+
+
+def test_the_float_roll_out_of_one_command_is_the_array_roll_out_bit_for_bit():
+    """The shield checks the plan alone on Python floats (`_rollout_one`); it must be the array code's result exactly,
+    or a verdict could differ with the number of candidates (zero yaw rates, reverse speeds and clipping included)."""
+    from planner.shield import _rollout_one, _rollout_unicycle
+
+    rng = np.random.default_rng(0)
+    robot = RobotConfig(min_speed_mps=0.3)
+    for i in range(2000):
+        state = np.array([*rng.uniform(-3, 3, 3), rng.uniform(-0.3, 1.2), 0.0 if i % 5 == 0 else rng.uniform(-2, 2)])
+        cmd = np.column_stack([rng.uniform(-0.5, 1.5, 16), rng.choice([0.0, *rng.uniform(-3, 3, 3)], 16)])[None]
+        assert np.array_equal(_rollout_one(state, cmd, 0.1, robot), _rollout_unicycle(state, cmd, 0.1, robot))
+    assert np.array_equal(_rollout_unicycle(state, cmd, 0.1, robot)[0],
+                          np.stack([s[:2] for s in _stepped(state, cmd[0], robot)]))
+
+
+def _stepped(state, commands, robot):
+    """The roll-out with `clip_control` and `step_numpy` one step at a time (the definition)."""
+    x = state[None]
+    for u in commands:
+        x = step_numpy(x, clip_control(x, u[None], 0.1, robot), 0.1, robot.model)
+        yield x[0]
