@@ -15,6 +15,8 @@ of each p50 and p95 to mpc-gpgraph's.
     python bench/bench_policy_latency.py --suite crowdnav-plusplus
     python bench/bench_policy_latency.py --suite crowdnav-v1 --cell crossing-high-visible
     python bench/bench_policy_latency.py --suite crowdnav-v1 --agent ppo-crowdnav-mix ppo-crowdnav-mix+shield
+    python bench/bench_policy_latency.py --suite crowdnav-plusplus --agent ppo-crowdnav-20 ppo-crowdnav-20+shield \
+        --shield-horizon 0.5
 
 A shielded agent (`NAME+shield`) decides every env step (the shield checks the held action each step), so all
 its steps are timed; the network runs at its period inside them.
@@ -25,6 +27,7 @@ from __future__ import annotations
 import argparse
 import platform
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -41,12 +44,15 @@ AGENTS = {"crowdnav-classic": "ppo-crowdnav-classic", "crowdnav-plusplus": "ppo-
 CELLS = {"crowdnav-v1": "corridor-high-visible"}  # suite -> default cell (others: their only one)
 
 
-def decision_times(suite_name: str, cell: str, name: str, episodes: int) -> np.ndarray:
-    """Wall times (s) of `act` at the policy's decision steps of `episodes` episodes of the suite's cell."""
+def decision_times(suite_name: str, cell: str, name: str, episodes: int,
+                   shield_horizon_s: float | None = None) -> np.ndarray:
+    """Wall times (s) of `act` at the policy's decision steps of `episodes` episodes of the suite's cell; an agent's
+    shield (NAME+shield) looks `shield_horizon_s` ahead (None: the MPC's)."""
     suite = load_suite(suite_name)
     agent = name.startswith(("ppo", "sb3:"))
     every = suite.replan_every_steps or 1
-    config = PolicyConfig(name) if agent else \
+    shield = {} if shield_horizon_s is None else {"shield_horizon_s": shield_horizon_s}
+    config = PolicyConfig(name, mpc=replace(ENV_MPC, **shield)) if agent else \
         PolicyConfig(name, mpc=suite.mpc_config(ENV_MPC), replan_every_steps=every)
     env = CrowdNavEnv(observed(suite.cell(cell).env_config(SEED0), agent_wall_rays(config)))
     policy = make_policy(config, env)
@@ -75,11 +81,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--agent", nargs="+", default=None,
                     help="the agents (registry names or sb3:PATH.zip, each optionally NAME+shield; default: the "
                          "suite's)")
+    ap.add_argument("--shield-horizon", type=float, default=None, metavar="S",
+                    help="look-ahead of an agent's shield (NAME+shield), s (default: the MPC's, 1.6)")
     args = ap.parse_args(argv)
     set_threads(1)
     episodes = 2 if args.quick else 10
     cell = args.cell or CELLS.get(args.suite) or load_suite(args.suite).cells[0].name
-    rows = {name: decision_times(args.suite, cell, name, episodes) * 1e3
+    rows = {name: decision_times(args.suite, cell, name, episodes, args.shield_horizon) * 1e3
             for name in (*(args.agent or [AGENTS[args.suite]]), "mpc-cv", "mpc-gpgraph")}
     ref = rows["mpc-gpgraph"]
     print(f"{args.suite} {cell}, {episodes} episodes per policy (seeds {SEED0}+), one thread; "
