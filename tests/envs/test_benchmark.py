@@ -213,7 +213,12 @@ def test_cli_benchmark_misuse_is_one_line(tmp_path, capsys):
     for args, needle in ((["--suite", "nope"], "valid names"),
                          (["--suite", "smoke", "--cells", "real-mars"], "valid names"),
                          (["--suite", "smoke", "--policy", "teleport"], "valid names"),
-                         (["--suite", "smoke", "--data", str(tmp_path / "none")], "not found")):
+                         (["--suite", "smoke", "--data", str(tmp_path / "none")], "not found"),
+                         (["--suite", "smoke", "--policy", "mpc-cv+shield"], "already"),
+                         (["--suite", "smoke", "--policy", "random+shield+route"], "in the order"),
+                         (["--suite", "smoke", "--policy", "random+shield", "--mpc", "shield_horizon_s=0"],
+                          "shield_horizon_s > 0"),
+                         (["--suite", "smoke", "--policy", "random+route", "--mpc", "route=none"], "needs")):
         code = main(["benchmark", *args, "--out", str(tmp_path / "o"), "--no-progress"])
         err = capsys.readouterr().err
         assert code == 2 and needle in err and len(err.strip().splitlines()) == 1, (args, err)
