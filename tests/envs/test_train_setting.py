@@ -131,8 +131,10 @@ def test_the_harness_runs_a_saved_agent_at_its_decision_period(tmp_path):
     assert old.decision_every_steps == 1  # an agent saved without the field decides every step
     agent = make_policy(PolicyConfig(_agent(tmp_path, cfg, {"decision_every_steps": 3})), env)
     assert agent.decision_every_steps == 3
-    calls, predict = [], agent.model.predict
+    calls, predict, fast = [], agent.model.predict, agent._fast  # count forward passes, whichever path runs
     agent.model.predict = lambda obs, **kw: (calls.append(1), predict(obs, **kw))[1]
+    if fast is not None:
+        agent._fast = lambda obs: (calls.append(1), fast(obs))[1]
     env.reset(seed=TRAIN_SEED_OFFSET)
     agent.reset(TRAIN_SEED_OFFSET)
     actions = []
