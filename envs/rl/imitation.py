@@ -18,11 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from crowdsim.distributed import WorkerDied, run_in_processes
+from crowdsim.distributed import RayUnavailableError, WorkerDied, run_in_processes, run_on_ray
 from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.policies import PolicyConfig, act, make_policy
+from envs.rl.config import BACKENDS
 from envs.rl.mix import Mix
 
 
@@ -116,8 +117,9 @@ def _chunk(args: tuple) -> list[tuple[dict, np.ndarray, np.ndarray, str]]:
         learner.load_state_dict(state)
         learner.set_training_mode(False)
     built: dict[str, tuple[CrowdNavEnv, Any]] = {}  # one env and expert per cell (a mix has many)
-    rng, out = np.random.default_rng(seeds[0]), []
-    for s in seeds:
+    out = []
+    for s in seeds:  # each episode's own generator (DAgger's mixing): the same labels however seeds are chunked
+        rng = np.random.default_rng(s)
         label, cfg = config.cell_of(s) if isinstance(config, Mix) else ("", config)
         if label not in built:
             env = CrowdNavEnv(cfg)
@@ -129,7 +131,8 @@ def _chunk(args: tuple) -> list[tuple[dict, np.ndarray, np.ndarray, str]]:
 
 def collect_demos(config: CrowdNavConfig | Mix, policy: str = "mpc-gpgraph", episodes: int = 60, seed: int = 0,
                   gamma: float = 0.99, workers: int = 1, learner: Any = None, beta: float = 1.0,
-                  every: int = 1, mpc: Any = None, successes_only: bool = False) -> Demos:
+                  every: int = 1, mpc: Any = None, successes_only: bool = False, backend: str = "local",
+                  address: str | None = None) -> Demos:
     """`episodes` episodes labelled by `policy` (seeds seed .. seed + episodes - 1) over `workers` processes, in
     `config`'s env or, for an `envs.rl.mix.Mix`, in each seed's cell, at
     a decision every `every` env steps (`_episode`; a planner expert re-plans every `every` steps). With a
@@ -137,7 +140,9 @@ def collect_demos(config: CrowdNavConfig | Mix, policy: str = "mpc-gpgraph", epi
     `episode_outcome` is then the outcome of the executed (mixed) episode. `mpc` (a `planner.MPCConfig`): the
     expert MPC's settings (None: the env's, `envs.policies.ENV_MPC`), e.g. a benchmark suite's planner defaults.
     `successes_only`: keep only the episodes that ended in success (the expert's failures teach failing);
-    ValueError when none did."""
+    ValueError when none did. `backend` "ray": one Ray task per episode, on the cluster at `address` ("auto",
+    "HOST:PORT") or a local Ray instance of `workers` CPUs (the optional `ray` extra); the labels equal the local
+    pool's (each episode depends on its seed alone)."""
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     if not isinstance(every, int) or every < 1:
@@ -146,17 +151,24 @@ def collect_demos(config: CrowdNavConfig | Mix, policy: str = "mpc-gpgraph", epi
     if learner is not None:  # sent to the workers as its constructor and detached weights
         learner = (type(learner), learner._get_constructor_parameters(),
                    {k: v.detach().clone() for k, v in learner.state_dict().items()})
-    chunks = [(config, policy, seeds[i::workers], gamma, learner, beta, every, mpc) for i in range(workers)
-              if seeds[i::workers]]
-    if len(chunks) == 1:
-        parts = [_chunk(chunks[0])]
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
+    groups = [[s] for s in seeds] if backend == "ray" else [seeds[i::workers] for i in range(workers)]
+    chunks = [(config, policy, g, gamma, learner, beta, every, mpc) for g in groups if g]
+    if backend == "ray":
+        try:
+            results = dict(run_on_ray(_chunk, chunks, address, None if address else workers))
+        except RayUnavailableError as exc:
+            raise ValueError(str(exc)) from exc
+    elif len(chunks) == 1:
+        results = {0: _chunk(chunks[0])}
     else:  # crowdsim's pool: a worker that dies (OOM) is replaced and its chunk rerun
         results = dict(run_in_processes(_chunk, chunks, len(chunks)))
-        died = {i: r for i, r in results.items() if isinstance(r, WorkerDied)}
-        if died:
-            raise RuntimeError(f"demonstrations of seeds {[chunks[i][2] for i in died]} were lost: "
-                               f"{next(iter(died.values()))}")
-        parts = [results[i] for i in range(len(chunks))]
+    died = {i: r for i, r in results.items() if isinstance(r, WorkerDied)}
+    if died:
+        raise RuntimeError(f"demonstrations of seeds {[chunks[i][2] for i in died]} were lost: "
+                           f"{next(iter(died.values()))}")
+    parts = [results[i] for i in range(len(chunks))]
     order = sorted(((s, ep) for c, part in zip(chunks, parts, strict=True) for s, ep in zip(c[2], part, strict=True)),
                    key=lambda x: x[0])
     if successes_only:

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from envs.atomic import write_json_atomic
-from envs.rl.config import QUICK, SCENARIO_DEFAULTS, TrainConfig
+from envs.rl.config import BACKENDS, QUICK, SCENARIO_DEFAULTS, TrainConfig
 from envs.rl.setting import TRAIN_SEED_OFFSET, add_setting_arguments
 
 
@@ -90,10 +90,12 @@ def expert_mpc(cfg: TrainConfig) -> Any:
     return load_suite(cfg.suite or cfg.mixture().mpc_suite).mpc_config(ENV_MPC)
 
 
-def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None) -> dict[str, Any]:
+def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None,
+               backend: str = "local", address: str | None = None) -> dict[str, Any]:
     """Behaviour cloning of the demo policy (demos from `demos_path`, or collected and saved to out/demos.npz),
     then for "dagger" `dagger_rounds` rounds of learner roll-outs labelled by the expert (seeds after the
-    demos' own) and cloning on the aggregate (saved to out/dagger.npz)."""
+    demos' own) and cloning on the aggregate (saved to out/dagger.npz). The expert's roll-outs run on `backend`
+    (`envs.rl.imitation.collect_demos`: the local pool, or Ray tasks at `address`)."""
     from envs.policies.sb3_files import DECISION_KEY, save_agent
     from envs.rl.imitation import Demos, behaviour_clone, collect_demos, concat
 
@@ -105,7 +107,7 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
         print(f"collecting {cfg.demo_episodes} {cfg.demo_policy} demonstrations ...", flush=True)
         demos = collect_demos(setting, cfg.demo_policy, cfg.demo_episodes, cfg.demo_seed, cfg.gamma, workers=workers,
                               every=cfg.decision_every_steps, mpc=expert_mpc(cfg),
-                              successes_only=cfg.demo_successes_only)
+                              successes_only=cfg.demo_successes_only, backend=backend, address=address)
         demos.save(out / "demos.npz")
     info: dict[str, Any] = {"demo_steps": len(demos.actions), "demo_episodes": len(demos.episode_seed),
                             "demo_success_rate": demos.success_rate}
@@ -117,7 +119,8 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     for r in range(cfg.dagger_rounds if cfg.warm_start == "dagger" else 0):
         seed = cfg.demo_seed + cfg.demo_episodes + r * cfg.dagger_episodes
         new = collect_demos(setting, cfg.demo_policy, cfg.dagger_episodes, seed, cfg.gamma, workers,
-                            learner=model.policy, beta=0.0, every=cfg.decision_every_steps, mpc=expert_mpc(cfg))
+                            learner=model.policy, beta=0.0, every=cfg.decision_every_steps, mpc=expert_mpc(cfg),
+                            backend=backend, address=address)
         demos = concat(demos, new)
         losses = behaviour_clone(model, demos, epochs=cfg.dagger_epochs or cfg.bc_epochs, seed=cfg.seed + r, **clone)
         rounds.append({"learner_success": new.success_rate, "steps": len(demos.actions), "loss": losses[-1]})
@@ -133,8 +136,10 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None)
     return info
 
 
-def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | None = None) -> int:
-    """Run (or resume) training into `out`; 0 on completion, 1 when training diverged."""
+def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | None = None,
+          backend: str = "local", address: str | None = None) -> int:
+    """Run (or resume) training into `out`; 0 on completion, 1 when training diverged. `backend`, `address`: where
+    the warm start's expert roll-outs run (`warm_start`)."""
     from stable_baselines3.common.logger import configure
 
     from envs.rl.monitor import Diverged, TrainMonitor, load_checkpoint, tensorboard_available
@@ -153,7 +158,7 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
         else:
             write_json_atomic(out / "config.json", cfg.to_json())
             if cfg.warm_start != "none":
-                monitor.note_warm_start(warm_start(cfg, model, out, demos_path))
+                monitor.note_warm_start(warm_start(cfg, model, out, demos_path, backend, address))
             monitor.evaluate(model)  # the curve starts at step 0 (the cloned or the random policy)
         remaining = cfg.total_steps - model.num_timesteps
         if remaining > 0:
@@ -236,6 +241,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", type=Path, default=None, metavar="DIR", help="resume the run in DIR")
     p.add_argument("--demos", type=Path, default=None, metavar="NPZ",
                    help="reuse demonstrations (a demos.npz of an earlier run) for --warm-start bc or dagger")
+    p.add_argument("--backend", choices=BACKENDS, default="local",
+                   help="where the warm start's expert roll-outs run: the local process pool, or one Ray task per "
+                        "episode (the 'ray' extra; the same labels)")
+    p.add_argument("--address", default=None, metavar="auto|HOST:PORT",
+                   help="Ray cluster for --backend ray (default: a local Ray instance)")
     p.add_argument("--quick", action="store_true",
                    help="a short smoke run (about a minute on a laptop CPU; not a usable agent): "
                         + ", ".join(f"{k} {v}" for k, v in QUICK.items()) + "; other flags override these")
@@ -294,6 +304,10 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
             rewards[key] = float(value)
         data["rewards"] = rewards
     cfg = TrainConfig.from_json(data)
+    if args.address is not None and args.backend != "ray":
+        raise ValueError("--address needs --backend ray")
+    if args.backend == "ray" and cfg.warm_start == "none":
+        raise ValueError("--backend ray runs the warm start's roll-outs; it needs --warm-start bc or dagger")
     if args.demos is not None and cfg.warm_start == "none":
         raise ValueError("--demos is used only with --warm-start bc or dagger")
     if args.demos is not None:
@@ -323,7 +337,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as exc:
         print(f"crowdnav train: error: {exc}", file=sys.stderr)
         return 2
-    return train(cfg, out, resume, args.demos)
+    return train(cfg, out, resume, args.demos, args.backend, args.address)
 
 
 if __name__ == "__main__":

@@ -313,3 +313,45 @@ def test_progress_eta_never_goes_negative():
     assert _hms(eta_s(1000, 400, 100.0)) == "0:00:06"
     assert _hms(eta_s(400000, 401408, 750.0)) == "0:00:00"  # the last rollout overshoots the total
     assert _hms(eta_s(1000, 0, 0.0)) == "--:--:--"
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("crowdsim-parallel")  # one xdist worker for every test that starts Ray or a pool
+def test_ray_roll_outs_give_the_local_pools_labels():
+    """`--backend ray`: the expert's demonstrations and a DAgger round's learner roll-outs, one Ray task per
+    episode, equal the local pool's (two processes, seeds interleaved), label for label."""
+    ray = pytest.importorskip("ray")
+    from stable_baselines3 import PPO
+
+    from envs.rl.imitation import collect_demos
+
+    cfg = TINY.env_config()
+    learner = PPO("MultiInputPolicy", CrowdNavEnv(cfg), seed=0, device="cpu",
+                  policy_kwargs={"features_extractor_class": CrowdAttentionExtractor}).policy
+    from dataclasses import replace
+
+    from envs.policies import ENV_MPC
+
+    # no wall-clock budget: a solve cut short by machine load would fall back and change the episode
+    mpc = replace(ENV_MPC, time_budget_s=30.0)
+    kwargs = [{"mpc": mpc}, {"mpc": mpc, "learner": learner, "beta": 0.0},
+              {"mpc": mpc, "learner": learner, "beta": 0.5}]
+    local = [collect_demos(cfg, "mpc-cv", episodes=3, seed=7, workers=2, **kw) for kw in kwargs]
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        remote = [collect_demos(cfg, "mpc-cv", episodes=3, seed=7, workers=2, backend="ray", **kw) for kw in kwargs]
+    finally:
+        ray.shutdown()
+    for a, b in zip(local, remote, strict=True):
+        assert list(a.episode_seed) == list(b.episode_seed) == [7, 8, 9]
+        np.testing.assert_array_equal(a.actions, b.actions)
+        np.testing.assert_array_equal(a.returns, b.returns)
+        assert all(np.array_equal(a.obs[k], b.obs[k]) for k in a.obs)
+        assert list(a.episode_outcome) == list(b.episode_outcome)
+
+
+def test_collect_demos_refuses_an_unknown_backend():
+    from envs.rl.imitation import collect_demos
+
+    with pytest.raises(ValueError, match="valid names: local, ray"):
+        collect_demos(TINY.env_config(), "mpc-cv", episodes=1, backend="slurm")
