@@ -29,7 +29,7 @@ import numpy as np
 
 from envs.policies.wrappers import SHIELD_SUFFIX
 from envs.view import Decision, PolicyView, action_command
-from planner import MPCConfig, PlanStats, constant_velocity_prediction, empty_prediction
+from planner import MPCConfig, PedPrediction, PlanStats, constant_velocity_prediction, empty_prediction
 from planner.shield import shield_control
 
 
@@ -66,7 +66,7 @@ class ShieldedPolicy:
                         predicted_group_id=decision.predicted_group_id)
 
 
-def cv_prediction(view: PolicyView):
+def cv_prediction(view: PolicyView) -> PedPrediction:
     """The pedestrians' constant-velocity futures (1, pred_len, N, 2) from `view.history`, as a `PedPrediction`."""
     p, t = view.pedestrians, view.timing
     if len(p.pos) == 0 or view.history is None:
