@@ -177,3 +177,16 @@ def test_route_without_walls_passes_the_view_unchanged():
     view = env.view()
     routed.act(view)
     assert probe.views[-1] is view
+
+
+def test_route_takes_a_wall_blind_policy_through_the_door():
+    """social-force heads straight for the goal and slides along the wall; with +route it goes through the door.
+    (crowdnav-tune's door cell at seed 1004 with 5 people: the goal is behind the room's wall.)"""
+    from dataclasses import replace
+
+    from envs.evaluation.episode import run_episode
+    from envs.evaluation.suite import load_suite
+
+    cfg = replace(load_suite("crowdnav-tune").cell("tune-door-low-visible").env_config(1004), n_pedestrians=5)
+    assert run_episode(cfg, "social-force", 1004).metrics["outcome"] == "timeout"
+    assert run_episode(cfg, "social-force+route", 1004).metrics["outcome"] == "success"
