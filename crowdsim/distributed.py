@@ -22,6 +22,7 @@ from multiprocessing.context import BaseContext
 from types import ModuleType
 from typing import Any, TypeVar
 
+BACKENDS = ("local", "ray")  # where independent tasks run: this machine's processes, or Ray tasks
 RAY_MISSING = "--backend ray needs the 'ray' extra (pip install ray)"
 
 J = TypeVar("J")

@@ -13,13 +13,12 @@ from tqdm import tqdm
 
 from crowdsim import __version__
 from crowdsim.config import SimConfig
-from crowdsim.distributed import WorkerDied, process_context, run_in_processes
+from crowdsim.distributed import BACKENDS, WorkerDied, process_context, run_in_processes
 from crowdsim.export import RecordingFiles, TrajectoryLog, recording_files, write_files, write_recording
 from crowdsim.presets import get_preset, sample_config
 from crowdsim.sim import CrowdSimulator
 
 SPLITS = ("train", "val", "test")
-BACKENDS = ("local", "ray")  # how make_dataset runs its recordings: this machine's processes, or Ray tasks
 
 
 @dataclass(frozen=True)

@@ -183,10 +183,12 @@ def clearances(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, rob
     return np.minimum(ped, wall[:, None, :])
 
 
-def touches_wall(robot_xy: np.ndarray, walls: np.ndarray | None, robot_radius: float) -> np.ndarray:
+def touches_wall(robot_xy: np.ndarray | None, walls: np.ndarray | None, robot_radius: float,
+                 wall_m: np.ndarray | None = None) -> np.ndarray:
     """(C,) bool: the rollouts (C, T, 2) whose body touches a wall at some step. A wall is where it is, not a
-    prediction: such a command is chosen only when every candidate touches one."""
-    return (wall_clearance(robot_xy, walls) < robot_radius).any(-1)
+    prediction: such a command is chosen only when every candidate touches one. `wall_m` (C, T): the centres'
+    distances to the nearest wall when already computed (`wall_clearance`; robot_xy and walls are then not read)."""
+    return ((wall_clearance(robot_xy, walls) if wall_m is None else wall_m) < robot_radius).any(-1)
 
 
 def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
@@ -228,6 +230,6 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     cost = violation + DEVIATION_WEIGHT * (((cands - cands[0]) / scale) ** 2).sum(-1)
     if previous is not None and cfg.shield_hold_weight > 0:
         cost = cost + cfg.shield_hold_weight * np.sqrt((((cands - previous) / scale) ** 2).sum(-1))
-    cost = cost + WALL_CONTACT_COST * (wall_m < cfg.robot.radius_m).any(-1)  # `touches_wall`
+    cost = cost + WALL_CONTACT_COST * touches_wall(None, walls, cfg.robot.radius_m, wall_m)
     best = int(np.argmin(cost))
     return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))

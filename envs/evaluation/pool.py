@@ -16,11 +16,16 @@ from collections.abc import Iterator, Sequence
 from contextlib import closing
 from typing import Any
 
-from crowdsim.distributed import RayUnavailableError, WorkerDied, import_ray, process_context, run_in_processes
+from crowdsim.distributed import (
+    BACKENDS,
+    RayUnavailableError,
+    WorkerDied,
+    import_ray,
+    process_context,
+    run_in_processes,
+)
 from crowdsim.distributed import run_on_ray as _run_on_ray
 from envs.evaluation.episode import EpisodeTask, error_record, run_task
-
-BACKENDS = ("local", "ray")
 
 
 def require_ray() -> Any:

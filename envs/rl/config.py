@@ -18,7 +18,6 @@ WARM_STARTS = ("none", "bc", "dagger")
 # and giving any of them is an error.
 SCENARIO_DEFAULTS: dict[str, Any] = {"scenario": "circle_crossing", "pedestrians": 5, "invisible": True,
                                      "time_limit_s": 40.0}
-BACKENDS = ("local", "ray")  # where the warm start's expert roll-outs run (as `crowdnav benchmark --backend`)
 # --quick: a smoke run of the whole pipeline (warm start, PPO, evaluation, checkpoints), not a usable agent.
 QUICK: dict[str, Any] = {"total_steps": 4096, "n_steps": 256, "eval_every_steps": 2048, "eval_episodes": 5,
                          "checkpoint_every_steps": 2048, "demo_episodes": 5, "bc_epochs": 5, "dagger_rounds": 1,

@@ -18,12 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from crowdsim.distributed import RayUnavailableError, WorkerDied, run_in_processes, run_on_ray
+from crowdsim.distributed import BACKENDS, RayUnavailableError, WorkerDied, run_in_processes, run_on_ray
 from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.policies import PolicyConfig, act, make_policy
-from envs.rl.config import BACKENDS
 from envs.rl.mix import Mix
 
 

@@ -37,8 +37,9 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from crowdsim.distributed import BACKENDS
 from envs.atomic import write_json_atomic
-from envs.rl.config import BACKENDS, QUICK, SCENARIO_DEFAULTS, TrainConfig
+from envs.rl.config import QUICK, SCENARIO_DEFAULTS, TrainConfig
 from envs.rl.setting import TRAIN_SEED_OFFSET, add_setting_arguments
 
 
