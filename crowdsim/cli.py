@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from crowdsim.config import GroupConfig, SimConfig
+from crowdsim.distributed import BACKENDS
 from crowdsim.files import check_writable_dir
 from crowdsim.generate import (
-    BACKENDS,
     SPLITS,
     DatasetIncomplete,
     DatasetInterrupted,

@@ -29,6 +29,12 @@ J = TypeVar("J")
 R = TypeVar("R")
 
 
+def check_backend(backend: str) -> None:
+    """ValueError naming the valid backends unless `backend` is one of `BACKENDS`."""
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
+
+
 class RayUnavailableError(ImportError):
     """`ray` cannot be imported."""
 

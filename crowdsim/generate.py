@@ -13,7 +13,7 @@ from tqdm import tqdm
 
 from crowdsim import __version__
 from crowdsim.config import SimConfig
-from crowdsim.distributed import BACKENDS, WorkerDied, process_context, run_in_processes
+from crowdsim.distributed import WorkerDied, check_backend, process_context, run_in_processes
 from crowdsim.export import RecordingFiles, TrajectoryLog, recording_files, write_files, write_recording
 from crowdsim.presets import get_preset, sample_config
 from crowdsim.sim import CrowdSimulator
@@ -205,8 +205,7 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
     worker process died twice (local pool) is not written; the others are, then DatasetIncomplete names it.
     Ctrl-C raises DatasetInterrupted (a KeyboardInterrupt) saying how many recordings were written.
     """
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
+    check_backend(backend)
     if address is not None and backend != "ray":
         raise ValueError("address needs backend='ray'")
     if workers is not None and workers < 1:

@@ -14,8 +14,8 @@ import os
 from dataclasses import fields, replace
 from typing import TYPE_CHECKING, Any
 
+from crowdsim.distributed import BACKENDS
 from envs.config import DEFAULT_PREDICTOR
-from envs.evaluation.pool import BACKENDS
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner.config import MPCConfig, RobotConfig
-from planner.dynamics import _clip1, clip_control, step_numpy
+from planner.dynamics import _clip_one, clip_control, step_numpy
 from planner.prediction import PedPrediction, current_positions
 from planner.scene import resample_in_time, wall_clearance
 
@@ -114,13 +114,12 @@ def _rollout_unicycle(state: np.ndarray, commands: np.ndarray, dt_s: float, robo
 
 def _rollout_one(state: np.ndarray, commands: np.ndarray, dt_s: float, robot: RobotConfig) -> np.ndarray:
     """`_rollout_unicycle` of one command sequence (1, T, 2) on Python floats (the shield's check of the plan alone,
-    every step): the same operations, `np.clip` and `np.sinc` (numpy 2) spelled out, libm sin/cos, ~10x cheaper."""
+    every step): the same operations (`clip_control`'s float twin `_clip_one`, `np.sinc` (numpy 2) spelled out, libm
+    sin/cos), ~10x cheaper."""
     px, py, th, v0, v1 = (float(x) for x in state[:5])
-    a0, a1 = robot.max_accel_mps2 * dt_s, robot.max_yaw_accel_radps2 * dt_s
-    lo0, lo1, hi0, hi1 = -robot.min_speed_mps, -robot.max_yaw_rate_radps, robot.max_speed_mps, robot.max_yaw_rate_radps
     out = np.empty((1, len(commands[0]), 2))
     for k, (c0, c1) in enumerate(commands[0].tolist()):
-        v0, v1 = _clip1(v0 + _clip1(c0 - v0, -a0, a0), lo0, hi0), _clip1(v1 + _clip1(c1 - v1, -a1, a1), lo1, hi1)
+        v0, v1 = _clip_one(v0, v1, c0, c1, dt_s, robot)  # `clip_control` on floats
         half = v1 * dt_s / 2
         y = math.pi * (half / math.pi)
         y = y if y != 0.0 else SINC_EPS

@@ -17,9 +17,9 @@ from contextlib import closing
 from typing import Any
 
 from crowdsim.distributed import (
-    BACKENDS,
     RayUnavailableError,
     WorkerDied,
+    check_backend,
     import_ray,
     process_context,
     run_in_processes,
@@ -45,8 +45,7 @@ def run_tasks(tasks: Sequence[EpisodeTask], workers: int = 1, backend: str = "lo
     policy's (e.g. an env that cannot be built) stops the run and is raised. A task whose worker process died
     twice (local pool or Ray) yields {"record": error record} (outcome "error", the cause in `error`).
     """
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
+    check_backend(backend)
     if backend == "ray":
         require_ray()
         results = _run_on_ray(run_task, tasks, address, None if address else workers)

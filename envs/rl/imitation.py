@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from crowdsim.distributed import BACKENDS, RayUnavailableError, WorkerDied, run_in_processes, run_on_ray
+from crowdsim.distributed import RayUnavailableError, WorkerDied, check_backend, run_in_processes, run_on_ray
 from envs.atomic import write_atomic
 from envs.config import CrowdNavConfig
 from envs.env import CrowdNavEnv
@@ -150,8 +150,7 @@ def collect_demos(config: CrowdNavConfig | Mix, policy: str = "mpc-gpgraph", epi
     if learner is not None:  # sent to the workers as its constructor and detached weights
         learner = (type(learner), learner._get_constructor_parameters(),
                    {k: v.detach().clone() for k, v in learner.state_dict().items()})
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
+    check_backend(backend)
     groups = [[s] for s in seeds] if backend == "ray" else [seeds[i::workers] for i in range(workers)]
     chunks = [(config, policy, g, gamma, learner, beta, every, mpc) for g in groups if g]
     if backend == "ray":
