@@ -209,9 +209,10 @@ class CrowdNavEnv(gym.Env):
             self._peds_cache = (self._state, peds)
         return peds
 
-    def view(self, history: bool = True, future: bool = False) -> PolicyView:
+    def view(self, history: bool | int = True, future: bool = False) -> PolicyView:
         """What a policy reads now (`envs.view.PolicyView`): the last observation and the typed scene, copies; the
-        history window only when asked for; the pedestrians' true future only when asked for (reference policies)."""
+        history window only when asked for (True; an int k: its newest k rows only, as `history_window`); the
+        pedestrians' true future only when asked for (reference policies)."""
         if not self._obs:
             raise RuntimeError("view() before reset()")
         p = self._sensed(self.pedestrians())
@@ -222,24 +223,30 @@ class CrowdNavEnv(gym.Env):
             t = self.timing
             ahead = self.crowd.future(p.ped_id, t.step_s * np.arange(1, t.pred_len + 1))
         return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),
-                          self.config.robot, p, self.history_window(p) if history else None,
+                          self.config.robot, p, self._history_rows(p, history),
                           np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s, ahead)
 
     def action_for(self, decision: Decision) -> np.ndarray:
         """The action (2,) float32 a policy's decision asks for: its action, or the action of its control."""
         return decision.action if decision.action is not None else self.control_to_action(decision.control)
 
-    def history_window(self, p: Pedestrians | None = None) -> np.ndarray:
+    def _history_rows(self, p: Pedestrians, history: bool | int) -> np.ndarray | None:
+        """`view`'s history: None (False), the whole window (True) or its newest `history` rows (an int)."""
+        if history is False or history is None:
+            return None
+        return self.history_window(p, None if history is True else int(history))
+
+    def history_window(self, p: Pedestrians | None = None, rows: int | None = None) -> np.ndarray:
         """(obs_len = 8, N, 2) m positions of `pedestrians()` 0.4 s apart, the last row being now. On a 0.4 s tick the
         rows are the recorded snapshots; between ticks each row is interpolated linearly between the two
         snapshots around its time (the newest interval ends at the current positions). For a pedestrian seen
         for less than 2.8 s, the rows before its first snapshot (or, if it came after the last tick, before now)
         run its velocity over its first 0.4 s in view backwards (`envs.history.extrapolate_back`): one who has
         just come into view is seen walking, not standing (zero velocity only at the instant it appears). `p`: the
-        rows to give (default `pedestrians()`)."""
+        rows to give (default `pedestrians()`). `rows`: the newest rows only, (rows, N, 2), the same floats."""
         p = self.pedestrians() if p is None else p
         tick = self.config.ticks_per_prediction_step
-        return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s)
+        return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s, rows)
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped

@@ -92,13 +92,15 @@ class PedHistory:
                 out[k] = arrival.vel
         return out
 
-    def window_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, step_s: float) -> np.ndarray:
+    def window_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, step_s: float,
+                   rows: int | None = None) -> np.ndarray:
         """(length, n, 2) m history of pedestrians ped_id (n,) now at pos (n, 2) m, `frac` (in [0, 1)) of a step_s
         snapshot interval after the newest snapshot, rows step_s apart and the last one now. Off the tick each
         row is interpolated between the two snapshots around its time; the rows before a pedestrian's first
         observation (its first snapshot, or now if it came after the newest one) are extrapolated back at its
-        early velocity (`extrapolate_back`)."""
-        snaps, first = self._window(ped_id, None if frac == 0.0 else pos)
+        early velocity (`extrapolate_back`). `rows` (1 .. length): only the newest rows, (rows, n, 2), the whole
+        window's last rows exactly, from the newest snapshots only (cheaper)."""
+        snaps, first = self._window(ped_id, None if frac == 0.0 else pos, rows)
         out = snaps
         if frac > 0.0:
             out = np.empty_like(snaps)
@@ -119,20 +121,25 @@ class PedHistory:
         position (standing still), so the array is always finite (`window_now` replaces the padding)."""
         return self._window(ped_id, current)[0]
 
-    def _window(self, ped_id: np.ndarray, current: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """`window` and, found in the same pass, (n,) int the oldest row holding a snapshot of each pedestrian
-        (`length` for one in no kept snapshot, whose rows are all `current`)."""
+    def _window(self, ped_id: np.ndarray, current: np.ndarray | None = None,
+                rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """`window` (its newest `rows` rows; default all `length`) and, found in the same pass, (n,) int the oldest
+        row holding a snapshot of each pedestrian (`rows` for one in no kept snapshot, whose rows are all
+        `current`)."""
         if not self._snaps:
             raise RuntimeError("no snapshot recorded yet")
+        length = self.length if rows is None else rows
+        if not 1 <= length <= self.length:
+            raise ValueError(f"rows must be in 1..{self.length}, got {rows}")
         ped_id = np.asarray(ped_id)
-        out = np.empty((self.length, len(ped_id), 2))
-        first = np.full(len(ped_id), self.length)
-        snaps = list(self._snaps)
-        row = self.length - 1
+        out = np.empty((length, len(ped_id), 2))
+        first = np.full(len(ped_id), length)
+        snaps = list(self._snaps)[-length:]
+        row = length - 1
         for ids, pos in reversed(snaps):
             loc = np.clip(np.searchsorted(ids, ped_id), 0, max(len(ids) - 1, 0))
             found = (ids[loc] == ped_id) if len(ids) else np.zeros(len(ped_id), bool)
-            if row == self.length - 1:
+            if row == length - 1:
                 if current is not None:
                     out[row] = np.where(found[:, None], pos[loc] if len(ids) else 0.0, current)
                 elif not found.all():
@@ -144,6 +151,10 @@ class PedHistory:
             first[found] = row
             row -= 1
         out[: row + 1] = out[row + 1]
+        kept = len(self._snaps)
+        if length < kept and (late := np.flatnonzero(first > 0)).size:  # seen in an older snapshot: no row is before
+            older = set().union(*(ids.tolist() for ids, _ in list(self._snaps)[: kept - length]))
+            first[[k for k in late.tolist() if int(ped_id[k]) in older]] = 0
         return out, first
 
 

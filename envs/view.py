@@ -38,7 +38,8 @@ class PolicyView:
     robot_state: (nz,) the planner's state (unicycle x, y, heading, v, omega; holonomic x, y, vx, vy).
     goal: (2,). robot: the robot's `RobotConfig`. pedestrians: those in the scene now.
     history: (obs_len, N, 2) their positions `timing.step_s` apart, the last row now (rows of `pedestrians`); None
-        for a policy that declares `reads_history = False` (learned agents: the window costs ~0.1 ms a step).
+        for a policy that declares `reads_history = False` (learned agents: the window costs ~0.1-0.2 ms a step);
+        its newest k rows for one that declares `reads_history = k` (an int: the shielded agents read 2).
     walls: (W, 4) wall segments x0, y0, x1, y1. timing: the prediction timing. dt_s: the env step, s.
     future: privileged, for reference policies only (`reads_future = True`, e.g. `mpc-oracle`): where the
         pedestrians will be, (pred_len, N, 2) m at +step_s ... +pred_len step_s (rows of `pedestrians`), NaN where

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -64,6 +65,12 @@ class ShieldVerdict:
 
 def candidate_controls(robot: RobotConfig, preferred: np.ndarray) -> np.ndarray:
     """(C, 2) constant commands, the preferred (MPC) control first."""
+    return np.vstack([np.asarray(preferred, float)[None], _command_grid(robot)])
+
+
+@lru_cache(maxsize=16)
+def _command_grid(robot: RobotConfig) -> np.ndarray:
+    """The (C - 1, 2) grid of `candidate_controls` (read-only: one array per robot, built once)."""
     if robot.model == "unicycle":
         speeds = np.linspace(-robot.min_speed_mps, robot.max_speed_mps, N_SPEEDS)
         turns = np.linspace(-robot.max_yaw_rate_radps, robot.max_yaw_rate_radps, N_TURNS)
@@ -73,7 +80,8 @@ def candidate_controls(robot: RobotConfig, preferred: np.ndarray) -> np.ndarray:
         angles = np.linspace(-np.pi, np.pi, 2 * N_TURNS, endpoint=False)
         dirs = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
         grid = np.vstack([np.zeros((1, 2)), (speeds[:, None, None] * dirs[None]).reshape(-1, 2)])
-    return np.vstack([np.asarray(preferred, float)[None], grid])
+    grid.flags.writeable = False
+    return grid
 
 
 def rollout_candidates(state: np.ndarray, commands: np.ndarray, dt_s: float, robot: RobotConfig) -> np.ndarray:
@@ -90,25 +98,80 @@ def rollout_candidates(state: np.ndarray, commands: np.ndarray, dt_s: float, rob
     return np.stack(out, axis=1)
 
 
+def rollout_constant(state: np.ndarray, commands: np.ndarray, n_steps: int, dt_s: float,
+                     robot: RobotConfig) -> np.ndarray:
+    """`rollout_candidates` of constant commands (C, 2), each held for n_steps: positions (C, n_steps, 2), the same
+    floats. For the unicycle the speeds and yaw rates ramp independently, so each distinct value of each is ramped
+    once, on Python floats (the shield's grid has 5 speeds and 9 yaw rates for its 45 commands)."""
+    commands = np.asarray(commands, float)
+    if robot.model != "unicycle":
+        return rollout_candidates(state, np.repeat(commands[:, None], n_steps, axis=1), dt_s, robot)
+    state = np.asarray(state, float)
+    vels = np.empty((len(commands), n_steps, 2))
+    limits = ((robot.max_accel_mps2 * dt_s, -robot.min_speed_mps, robot.max_speed_mps),
+              (robot.max_yaw_accel_radps2 * dt_s, -robot.max_yaw_rate_radps, robot.max_yaw_rate_radps))
+    for j, (accel, lo, hi) in enumerate(limits):
+        ramps: dict[float, list[float]] = {}  # one ramp per distinct value (0.0 and -0.0 ramp alike: tested)
+        column = commands[:, j].tolist()
+        for u in column:
+            if u not in ramps:
+                ramps[u] = _ramp(float(state[3 + j]), u, n_steps, accel, lo, hi)
+        vels[:, :, j] = [ramps[u] for u in column]
+    return _pose_rollout(state, vels, dt_s)
+
+
+def _ramp(v: float, u: float, n_steps: int, accel: float, lo: float, hi: float) -> list[float]:
+    """One velocity component under a constant command u: `clip_control`'s update on floats (`_clip1` inlined),
+    n_steps times; once an update leaves v as it was, it stays there."""
+    out: list[float] = []
+    while len(out) < n_steps:
+        step = u - v
+        step = step if step > -accel else -accel
+        step = step if step < accel else accel
+        new = v + step
+        new = new if new > lo else lo
+        new = new if new < hi else hi
+        if new == v and out:  # a fixed point (the sign of a zero aside, which the next update keeps too)
+            return out + [new] * (n_steps - len(out))
+        out.append(new)
+        v = new
+    return out
+
+
 def _rollout_unicycle(state: np.ndarray, commands: np.ndarray, dt_s: float, robot: RobotConfig) -> np.ndarray:
     """`rollout_candidates` for the unicycle: the float operations of `clip_control` and `step_numpy` in the same
-    order (so bit-identical), on the pose's components instead of stacked states: fewer numpy calls per step."""
+    order (so bit-identical). Only the velocities need a loop over the steps (each clipped against the last, with
+    `np.clip`'s max-then-min spelt as ufuncs); the pose follows for all steps at once (`_pose_rollout`)."""
     c, n_steps = commands.shape[:2]
-    px, py, th = (np.full(c, state[i]) for i in range(3))
-    vel = np.tile(state[3:5], (c, 1))
+    vel = np.tile(np.asarray(state[3:5], float), (c, 1))
     accel = np.array([robot.max_accel_mps2, robot.max_yaw_accel_radps2]) * dt_s
     lo = np.array([-robot.min_speed_mps, -robot.max_yaw_rate_radps])
     hi = np.array([robot.max_speed_mps, robot.max_yaw_rate_radps])
-    out = np.empty((c, n_steps, 2))
+    vels = np.empty((c, n_steps, 2))
     for k in range(n_steps):
-        vel = np.clip(vel + np.clip(commands[:, k] - vel, -accel, accel), lo, hi)
-        half = vel[:, 1] * dt_s / 2
-        dist = vel[:, 0] * dt_s * np.sinc(half / np.pi)
-        heading = th + half
-        px = px + dist * np.cos(heading)
-        py = py + dist * np.sin(heading)
-        th = th + vel[:, 1] * dt_s
-        out[:, k, 0], out[:, k, 1] = px, py
+        vel = np.minimum(np.maximum(vel + np.minimum(np.maximum(commands[:, k] - vel, -accel), accel), lo), hi)
+        vels[:, k] = vel
+    return _pose_rollout(state, vels, dt_s)
+
+
+def _pose_rollout(state: np.ndarray, vels: np.ndarray, dt_s: float) -> np.ndarray:
+    """Unicycle positions (C, T, 2) from `state` under the applied velocities (C, T, 2): `step_numpy`'s exact
+    integration, with the heading and position updates as running sums from the start pose (`np.cumsum` adds in
+    order, as the stepwise update does) and `np.sinc` (numpy 2) spelt out."""
+    c, n_steps = vels.shape[:2]
+    half = vels[..., 1] * dt_s / 2
+    y = np.pi * (half / np.pi)
+    y = np.where(y, y, SINC_EPS)
+    dist = vels[..., 0] * dt_s * (np.sin(y) / y)
+    runs = np.empty((c, n_steps + 1))  # a start value, then the increments: their running sum is the update
+    runs[:, 0] = state[2]
+    np.multiply(vels[:, :-1, 1], dt_s, out=runs[:, 1:n_steps])
+    heading = np.cumsum(runs[:, :n_steps], axis=1) + half  # the heading before each step + half its turn
+    out = np.empty(vels.shape)
+    for i, trig in enumerate((np.cos, np.sin)):
+        runs[:, 0] = state[i]
+        np.multiply(dist, trig(heading), out=runs[:, 1:])
+        out[..., i] = np.cumsum(runs, axis=1)[:, 1:]
     return out
 
 
@@ -150,10 +213,21 @@ def sample_futures(prediction: PedPrediction, dt_s: float, n_steps: int,
     has_cv = with_cv and hist is not None and np.shape(hist)[0] >= 2
     if has_cv:
         hist = np.asarray(hist, float)[:, real]
-        vel = (hist[-1] - hist[-2]) / prediction.step_s
-        times = dt_s * np.arange(1, n_steps + 1)
-        futures = np.concatenate([futures, (now[None] + times[:, None, None] * vel[None])[None]])
+        cv = cv_futures(now, (hist[-1] - hist[-2]) / prediction.step_s, dt_s, n_steps)
+        futures = np.concatenate([futures, cv])
     return futures, np.asarray(prediction.radii)[real], has_cv
+
+
+def cv_futures(now: np.ndarray, velocity: np.ndarray, dt_s: float, n_steps: int) -> np.ndarray:
+    """The constant-velocity future (1, n_steps, n, 2) m at +dt_s .. +n_steps dt_s of pedestrians at `now` (n, 2) m
+    walking at `velocity` (n, 2) m/s."""
+    times = dt_s * np.arange(1, n_steps + 1)
+    return (now[None] + times[:, None, None] * velocity[None])[None]
+
+
+def horizon_steps(cfg: MPCConfig) -> int:
+    """The shield's look-ahead in checks (T): `shield_horizon_s` / `shield_dt_s`, at least 1."""
+    return max(1, int(round(cfg.shield_horizon_s / cfg.shield_dt_s)))
 
 
 def within_reach(robot_xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, cfg: MPCConfig) -> np.ndarray:
@@ -196,31 +270,45 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     (state_dim,) against every predicted sample and wall; replace its first control by a constant command
     when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring). ``previous`` (2,): the command
     the shield applied at the previous step, if it replaced the plan's control there."""
-    n_steps = max(1, int(round(cfg.shield_horizon_s / cfg.shield_dt_s)))
+    futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, horizon_steps(cfg), cfg.shield_cv)
+    return shield_futures(state, planned, futures, radii, walls, cfg, previous, certain_last=has_cv)
+
+
+def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, radii: np.ndarray,
+                   walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None,
+                   certain_last: bool = False) -> ShieldVerdict:
+    """`shield_control` on the pedestrians' futures (K, T, n, 2) m at the shield's own times (+shield_dt_s ..
+    +T shield_dt_s, T = `horizon_steps(cfg)`) with radii (n,) m; `certain_last`: the last future counts as certain
+    (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1."""
+    n_steps = horizon_steps(cfg)
     planned = np.asarray(planned, float)
     cands = candidate_controls(cfg.robot, planned[0])
-    futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, n_steps, cfg.shield_cv)
     near = within_reach(np.asarray(state, float)[:2], futures, radii, cfg)
     # walls: the MPC's wall margin while nobody is within reach, else the pedestrians' (see the module docstring)
     wall_slack = 0.0 if near.any() else cfg.shield_margin_m - (cfg.wall_clearance_m - cfg.robot.radius_m)
+    futures, radii = futures[:, :, near], radii[near]
+    n_sampled = len(futures) - certain_last
 
-    def check(commands: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Wall distances (c, T), shortfalls below the margin (c, K [+1], T) and risks (c,) of commands (c, T, 2)."""
-        xy = rollout_candidates(state, commands, cfg.shield_dt_s, cfg.robot)
+    def check(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Wall distances (c, T), shortfalls below the margin (c, K, T) and risks (c,) of roll-outs (c, T, 2)."""
         wall_m = wall_clearance(xy, walls)
-        short = cfg.shield_margin_m - clearances(xy, futures[:, :, near], radii[near], cfg.robot.radius_m, walls,
-                                                 wall_slack, wall_m)
-        hit = (short > 0).any(-1)  # (c, K [+1])
-        risk = hit[:, : len(futures) - has_cv].mean(-1)
-        if has_cv:  # the constant-velocity future must be avoided outright
+        short = cfg.shield_margin_m - clearances(xy, futures, radii, cfg.robot.radius_m, walls, wall_slack, wall_m)
+        hit = (short > 0).any(-1)  # (c, K)
+        risk = hit[:, :n_sampled].mean(-1) if n_sampled else np.zeros(len(hit))
+        if certain_last:  # the constant-velocity future must be avoided outright
             risk = np.maximum(risk, hit[:, -1])
         return wall_m, short, risk
 
     # the plan alone first: when it passes (most steps), the grid of alternatives is never rolled out
-    wall0, short0, risk0 = check(plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)[None])
+    if len(planned) == 1:  # one command held (a shielded agent's): the cheaper constant roll-out, the same floats
+        xy0 = rollout_constant(state, planned, n_steps, cfg.shield_dt_s, cfg.robot)
+    else:
+        plan = plan_commands(planned, cfg.dt_s, cfg.shield_dt_s, n_steps)[None]
+        xy0 = rollout_candidates(state, plan, cfg.shield_dt_s, cfg.robot)
+    wall0, short0, risk0 = check(xy0)
     if risk0[0] <= cfg.shield_max_risk:
         return ShieldVerdict(cands[0].copy(), float(risk0[0]), False, float(risk0[0]))
-    wall_m, short, risk = check(np.repeat(cands[1:, None], n_steps, axis=1))
+    wall_m, short, risk = check(rollout_constant(state, cands[1:], n_steps, cfg.shield_dt_s, cfg.robot))
     wall_m, short, risk = (np.concatenate(pair) for pair in ((wall0, wall_m), (short0, short), (risk0, risk)))
     weights = np.exp(-cfg.shield_dt_s * np.arange(1, n_steps + 1) / cfg.shield_tau_s)
     violation = (np.maximum(short, 0.0) * weights).sum(-1).mean(-1)

@@ -144,7 +144,8 @@ def _json_safe(obj: Any) -> Any:
 
 class Policy(Protocol):
     """What the episode loop needs of a policy. Optional: `stats` (a `planner.PlanStats`), and `reads_history`
-    (False: the policy reads no `view.history`, which is then None and not computed; default True)."""
+    (False: the policy reads no `view.history`, which is then None and not computed; an int k: only the window's
+    newest k rows; default True, the whole window)."""
 
     name: str
 

@@ -7,8 +7,8 @@ after their solve) is a cheap check of that decision, every env step:
 1. the wrapped policy decides (`Decision.action`, mapped to its command by `envs.view.action_command`, or
    `Decision.control`);
 2. the command, held over ``shield_horizon_s``, is rolled out with the robot's limits and checked against the
-   pedestrians' constant-velocity futures (from the last two 0.4 s rows of `view.history`, the future `mpc-cv`
-   plans with) and the walls;
+   pedestrians' constant-velocity future (from the last two 0.4 s rows of `view.history`, the future `mpc-cv`
+   plans with), which counts as certain, and the walls;
 3. if it comes closer than ``shield_margin_m`` to someone (the constant-velocity future counts as certain) or
    touches a wall, the shield replaces it by the constant command (a grid of speed x yaw rate) with the least
    time-discounted violation; otherwise the wrapped policy's decision goes to the env unchanged (its action,
@@ -29,19 +29,20 @@ import numpy as np
 
 from envs.policies.wrappers import SHIELD_SUFFIX
 from envs.view import Decision, PolicyView, action_command
-from planner import MPCConfig, PedPrediction, PlanStats, constant_velocity_prediction, empty_prediction
-from planner.shield import shield_control
+from planner import MPCConfig, PlanStats
+from planner.shield import cv_futures, horizon_steps, shield_futures
 
 
 class ShieldedPolicy:
     """`inner` with every decision checked by the safety shield of `config` (see the module docstring)."""
 
-    reads_history = True  # the constant-velocity futures come from the history window
-
     def __init__(self, inner: Any, config: MPCConfig) -> None:
         if config.shield_horizon_s <= 0:
             raise ValueError("the shield needs MPCConfig.shield_horizon_s > 0 (0 turns it off)")
         self.inner, self.config = inner, config
+        # the constant-velocity future needs the window's last two rows; more if the wrapped policy reads more
+        reads = getattr(inner, "reads_history", True)
+        self.reads_history: bool | int = True if reads is True else max(2, int(reads))
         self.name = f"{inner.name}{SHIELD_SUFFIX}"
         self.stats = PlanStats()
         self._previous: np.ndarray | None = None
@@ -54,8 +55,9 @@ class ShieldedPolicy:
         start = time.perf_counter()
         decision = self.inner.act(view)
         command = decision.control if decision.control is not None else action_command(*decision.action, view.robot)
-        verdict = shield_control(view.robot_state, np.asarray(command, float)[None], cv_prediction(view), view.walls,
-                                 self.config, self._previous)
+        futures, radii = self._futures(view)
+        verdict = shield_futures(view.robot_state, np.asarray(command, float)[None], futures, radii, view.walls,
+                                 self.config, self._previous, certain_last=True)
         self._previous = verdict.control.copy() if verdict.replaced else None
         self.stats.counts["calls"] += 1
         self.stats.counts["shielded"] += int(verdict.replaced)
@@ -66,9 +68,12 @@ class ShieldedPolicy:
                         predicted_group_id=decision.predicted_group_id)
 
 
-def cv_prediction(view: PolicyView) -> PedPrediction:
-    """The pedestrians' constant-velocity futures (1, pred_len, N, 2) from `view.history`, as a `PedPrediction`."""
-    p, t = view.pedestrians, view.timing
-    if len(p.pos) == 0 or view.history is None:
-        return empty_prediction(t.pred_len, t.step_s)
-    return constant_velocity_prediction(view.history, p.radius, n_steps=t.pred_len, step_s=t.step_s)
+    def _futures(self, view: PolicyView) -> tuple[np.ndarray, np.ndarray]:
+        """The pedestrians' constant-velocity future (1, T, N, 2) at the shield's times, from the last two rows of
+        `view.history` (`view.timing.step_s` apart), and their radii (N,)."""
+        p, cfg = view.pedestrians, self.config
+        if len(p.pos) == 0 or view.history is None:
+            return np.zeros((1, horizon_steps(cfg), 0, 2)), np.zeros(0)
+        hist = np.asarray(view.history, float)
+        velocity = (hist[-1] - hist[-2]) / view.timing.step_s if len(hist) >= 2 else np.zeros_like(hist[-1])
+        return cv_futures(hist[-1], velocity, cfg.shield_dt_s, horizon_steps(cfg)), np.asarray(p.radius, float)

@@ -39,8 +39,11 @@ class CrowdAttentionExtractor(BaseFeaturesExtractor):
     observation_space: the env's Dict space. embed_dim: width of a pedestrian row's embedding (and of the crowd
     feature). robot_dim: width of the robot embedding. use_groups: add each row's group-pooled embedding and
     its group size. use_predictions: add each row's predicted future (needs `predictions` in the observation).
-    Output: (B, robot_dim + embed_dim).
+    Output: (B, robot_dim + embed_dim). `traceable`: its forward has no branch on the data (only on the settings), so
+    `envs.policies.sb3_actor` may trace it with TorchScript.
     """
+
+    traceable = True
 
     def __init__(self, observation_space: spaces.Dict, embed_dim: int = 64, robot_dim: int = 32,
                  use_groups: bool = True, use_predictions: bool = False) -> None:

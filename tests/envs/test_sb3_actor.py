@@ -24,6 +24,7 @@ def test_mean_actor_equals_predict(name, suite, cell):
     policy = make_policy(cfg, env)
     fast = mean_actor(policy.model)
     assert fast is not None and policy._fast is not None
+    assert fast.traced  # the TorchScript trace of the forward pass, checked here on an episode
     obs, _ = env.reset(seed=0)
     rng = np.random.default_rng(0)
     for step in range(60):  # states along an episode, and random observations off it
@@ -40,3 +41,23 @@ def test_agents_outside_the_fast_path_keep_predict():
 
     env = CrowdNavEnv()
     assert mean_actor(SAC("MultiInputPolicy", env, buffer_size=10, learning_starts=0)) is None
+
+
+def test_an_extractor_not_known_to_be_traceable_keeps_the_eager_pass():
+    """A trace records one path through the forward pass: an extractor that branches on the data would be frozen
+    into the branch of the probe. Only extractors marked `traceable` (and SB3's own) are traced."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.torch_layers import CombinedExtractor
+
+    class Branchy(CombinedExtractor):
+        def forward(self, obs):
+            out = super().forward(obs)
+            return out * 2.0 if bool((obs["pedestrian_mask"] > 0.5).any()) else out
+
+    env = CrowdNavEnv()
+    model = PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, policy_kwargs={"features_extractor_class": Branchy})
+    fast = mean_actor(model)
+    assert fast is not None and not fast.traced
+    obs, _ = env.reset(seed=0)
+    assert np.array_equal(fast(obs), model.predict(obs, deterministic=True)[0])
+    assert mean_actor(PPO("MultiInputPolicy", env, n_steps=8, batch_size=8)).traced  # SB3's combined extractor

@@ -10,7 +10,7 @@ from planner_helpers import PRED, STEP_S, make_config
 
 from planner import MPCConfig, MPCPlanner, PedPrediction, RobotConfig, constant_velocity_prediction
 from planner.dynamics import clip_control, step_numpy
-from planner.shield import clearances, rollout_candidates, shield_control
+from planner.shield import candidate_controls, clearances, rollout_candidates, shield_control
 
 SHIELD = MPCConfig(shield_horizon_s=1.6)
 STRAIGHT = np.tile([1.2, 0.0], (10, 1))  # a plan that drives straight on at full speed
@@ -228,3 +228,32 @@ def _stepped(state, commands, robot):
     for u in commands:
         x = step_numpy(x, clip_control(x, u[None], 0.1, robot), 0.1, robot.model)
         yield x[0]
+
+
+def _zero_or(rng, lo, hi):
+    """A velocity or command that is often exactly 0.0 or -0.0 (the sign of a zero survives the clips) or a bound."""
+    return [0.0, -0.0, hi, rng.uniform(lo, hi)][rng.integers(4)]
+
+
+@pytest.mark.parametrize("robot", [RobotConfig(), RobotConfig(min_speed_mps=0.3), RobotConfig(model="holonomic")])
+def test_the_grid_roll_out_is_the_stepwise_roll_out_bit_for_bit(robot):
+    """The shield's grid (`rollout_constant`: each speed and yaw rate ramped once on floats, the pose as running sums)
+    and the general roll-out of changing commands (`rollout_candidates`) give the floats of stepping `clip_control`
+    and `step_numpy` one candidate at a time, signs of zeros included: a verdict cannot depend on the code path."""
+    from planner.shield import rollout_constant
+
+    rng = np.random.default_rng(7)
+    for i in range(40):
+        if robot.model == "unicycle":
+            state = np.array([*rng.uniform(-3, 3, 3), _zero_or(rng, -robot.min_speed_mps, 1.2), _zero_or(rng, -2, 2)])
+            preferred = np.array([_zero_or(rng, -0.5, 1.5), _zero_or(rng, -3, 3)])
+        else:
+            state = np.array([*rng.uniform(-3, 3, 2), _zero_or(rng, -0.8, 0.8), _zero_or(rng, -0.8, 0.8)])
+            preferred = rng.uniform(-1.5, 1.5, 2)
+        cands = candidate_controls(robot, preferred)
+        held = np.repeat(cands[:, None], 16, axis=1)
+        stepped = np.stack([np.stack([s[:2] for s in _stepped(state, c, robot)]) for c in held])
+        assert rollout_constant(state, cands, 16, 0.1, robot).tobytes() == stepped.tobytes()
+        varying = held + rng.normal(0.0, 0.5, held.shape) * (i % 2)
+        stepped = np.stack([np.stack([s[:2] for s in _stepped(state, c, robot)]) for c in varying])
+        assert rollout_candidates(state, varying, 0.1, robot).tobytes() == stepped.tobytes()
