@@ -4,6 +4,12 @@
 
 Each run folder's eval.csv (written by `envs.rl.train`) is one line per curve; the label is the folder name and
 the warm start read from its config.json. Wall time includes the warm start (demonstrations, cloning, DAgger).
+Where a run's checkpoints/state.json records DAgger rounds (`warm_start.dagger`), a third panel shows the learner's
+success in its own roll-outs after each round against the expert labels gathered so far (the generalist's curve:
+its training is DAgger; PPO did not improve on it).
+
+    python scripts/plot_learning_curves.py out/train/v1mix-a out/train/v1mix-b out/train/v1mix-c \
+        --out docs/rl/learning_curves_generalist.png --title "ppo-crowdnav-mix: DAgger from mpc-oracle"
 """
 
 from __future__ import annotations
@@ -29,6 +35,15 @@ def read_run(path: Path) -> tuple[str, dict[str, list[float]]]:
     return label + (f", a decision every {every} env steps" if every > 1 else ""), data
 
 
+def read_dagger(path: Path) -> list[tuple[int, float]]:
+    """(labels so far, learner success) after each DAgger round of the run, from checkpoints/state.json; [] if none."""
+    state = path / "checkpoints" / "state.json"
+    if not state.exists():
+        return []
+    rounds = json.loads(state.read_text()).get("warm_start", {}).get("dagger", [])
+    return [(int(r["steps"]), float(r["learner_success"])) for r in rounds]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", type=Path, nargs="+")
@@ -39,6 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         runs = [read_run(r) for r in args.runs]
+        dagger = [read_dagger(r) for r in args.runs]
         for item in args.extra_wall:
             name, _, secs = item.partition("=")
             for label, d in runs:
@@ -52,13 +68,19 @@ def main(argv: list[str] | None = None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
-    for label, d in runs:
-        line = axes[0].plot([s / 1e6 for s in d["steps"]], d["success"], label=label)[0]
+    panels = 3 if any(dagger) else 2
+    fig, axes = plt.subplots(1, panels, figsize=(6.5 * panels, 5))
+    for (label, d), rounds in zip(runs, dagger, strict=True):
+        line = axes[0].plot([s / 1e6 for s in d["steps"]], d["success"], marker=".", label=label)[0]
         axes[0].plot([s / 1e6 for s in d["steps"]], d["collision"], ls="--", color=line.get_color())
-        axes[1].plot([w / 60 for w in d["wall_s"]], d["success"], color=line.get_color())
+        axes[1].plot([w / 60 for w in d["wall_s"]], d["success"], marker=".", color=line.get_color())
+        if rounds:
+            axes[2].plot([n / 1e3 for n, _ in rounds], [v for _, v in rounds], marker="o", color=line.get_color())
     axes[0].set(xlabel="env steps (millions)", ylabel="rate (solid: success, dashed: collision)", ylim=(0, 1))
     axes[1].set(xlabel="wall time incl. warm start (min)", ylabel="success rate", ylim=(0, 1))
+    if panels == 3:
+        axes[2].set(xlabel="expert labels so far (thousands)", ylabel="learner success in its DAgger roll-outs",
+                    ylim=(0, 1))
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", fontsize=8, ncol=1)
