@@ -39,6 +39,7 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.dynamics import model_dims, robot_dynamics
+from planner.jit import compiled_nlpsol
 from planner.scene import SceneArrays
 
 EPS_DIST_M2 = 1e-6
@@ -364,7 +365,8 @@ def build_ocp(cfg: MPCConfig) -> OCP:
     lbx[layout.u], ubx[layout.u] = lb_u, ub_u
     lbx[layout.s] = 0.0
     nlp = {"x": w, "p": b.p, "f": b.cost, "g": ca.vertcat(*b.g)}
-    solver = ca.nlpsol("mpc", cfg.solver, nlp, _solver_options(cfg, b))
+    opts = _solver_options(cfg, b)
+    solver = compiled_nlpsol("mpc", cfg.solver, nlp, opts, ca.nlpsol("mpc", cfg.solver, nlp, opts))
     slack_fn = ca.Function("slack_min", [w, b.p], [ca.vertcat(*b.slack_min)])
     cost_fn = ca.Function("cost", [w, b.p], [b.cost])
     return OCP(solver, slack_fn, cost_fn, layout, sz, lbx, ubx, np.array(b.lbg), np.array(b.ubg))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
@@ -10,6 +11,10 @@ from types import ModuleType
 import pytest
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+
+# The suite builds MPCs of many configurations: solve them on CasADi's virtual machine (the same results) instead of
+# compiling each (~30 s; planner/jit.py). tests/planner/test_jit.py compiles; subprocesses inherit the setting.
+os.environ.setdefault("CROWDNAV_MPC_JIT", "off")
 
 
 @pytest.fixture(scope="session")
