@@ -33,25 +33,31 @@ def _plans(monkeypatch, mode: str) -> list:
 @pytest.mark.slow
 @pytest.mark.skipif(jit_mod.compiler() is None, reason="no C compiler on PATH")
 def test_the_compiled_solver_plans_as_the_virtual_machine_bit_for_bit_and_is_cached(monkeypatch, tmp_path):
-    monkeypatch.setenv(jit_mod.CACHE_ENV, str(tmp_path))
+    cache, cwd = tmp_path / "cache", tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    monkeypatch.setenv(jit_mod.CACHE_ENV, str(cache))
     reference = _plans(monkeypatch, "off")
-    assert not list(tmp_path.iterdir())
+    assert not cache.exists()
     compiled = _plans(monkeypatch, "on")
-    (cached,) = tmp_path.iterdir()
     assert compiled == reference  # every state, control, status and iteration count
     assert {status for _, _, status, _ in reference} == {"solved"}
+    (solver_file,) = cache.glob("*.casadi")
+    stem = solver_file.stem
+    assert {f.name for f in cache.iterdir()} == {f"{stem}.casadi", f"{stem}.so", f"{stem}.lock"}
 
     def no_compile(*args, **kwargs):
         raise AssertionError("compiled again instead of loading the cache")
 
     monkeypatch.setattr(jit_mod, "_compile", no_compile)
-    assert _plans(monkeypatch, "on") == reference  # loaded from the file
-    cached.write_bytes(b"not a casadi file")  # a corrupt cache entry is deleted and compiled again
+    assert _plans(monkeypatch, "on") == reference  # loaded from the files
+    assert not list(cwd.iterdir()) and len(list(cache.iterdir())) == 3  # loading writes nothing
+    solver_file.write_bytes(b"not a casadi file")  # a corrupt cache entry is removed and compiled again
     rebuilt, sentinel = [], object()
     monkeypatch.setattr(jit_mod, "_compile", lambda *args: rebuilt.append(args[-1]) or sentinel)
     shared_ocp.cache_clear()
     assert shared_ocp(SMALL).solver is sentinel
-    assert rebuilt == [cached] and not cached.exists()
+    assert rebuilt == [stem] and not solver_file.exists() and not (cache / f"{stem}.so").exists()
     shared_ocp.cache_clear()
 
 
@@ -68,4 +74,4 @@ def test_the_settings_are_checked_and_without_a_compiler_auto_keeps_the_virtual_
     monkeypatch.setenv(jit_mod.JIT_ENV, "on")
     with pytest.raises(RuntimeError, match="no C compiler"):
         jit_mod.compiled_nlpsol("mpc", "fatrop", {}, {}, reference)
-    assert not list(tmp_path.iterdir())
+    assert not list(tmp_path.iterdir())  # nothing compiled, nothing cached
