@@ -73,8 +73,8 @@ def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict, reference: ca
         return reference
     key = hashlib.sha256("\n".join([ca.__version__, FORMAT, *FLAGS, reference.serialize()]).encode()).hexdigest()[:24]
     stem, folder = f"{name}_{plugin}_{key}", cache_dir()
-    folder.mkdir(parents=True, exist_ok=True)
     try:
+        folder.mkdir(parents=True, exist_ok=True)
         with _locked(folder / f"{stem}.lock"):  # one process compiles a file; the others wait, then load it
             return _load(folder, stem) or _compile(name, plugin, nlp, opts, folder, stem)
     except Exception as exc:

@@ -75,3 +75,16 @@ def test_the_settings_are_checked_and_without_a_compiler_auto_keeps_the_virtual_
     with pytest.raises(RuntimeError, match="no C compiler"):
         jit_mod.compiled_nlpsol("mpc", "fatrop", {}, {}, reference)
     assert not list(tmp_path.iterdir())  # nothing compiled, nothing cached
+
+
+def test_an_unwritable_cache_keeps_the_virtual_machine_under_auto_and_is_an_error_under_on(monkeypatch, tmp_path):
+    blocked = tmp_path / "file"
+    blocked.write_text("a file where the cache folder should be")
+    monkeypatch.setenv(jit_mod.CACHE_ENV, str(blocked / "cache"))
+    monkeypatch.setattr(jit_mod, "compiler", lambda: "/usr/bin/gcc")
+    reference = ca.Function("f", [ca.SX.sym("x")], [ca.SX.sym("x") * 0])
+    monkeypatch.setenv(jit_mod.JIT_ENV, "auto")
+    assert jit_mod.compiled_nlpsol("mpc", "fatrop", {}, {}, reference) is reference
+    monkeypatch.setenv(jit_mod.JIT_ENV, "on")
+    with pytest.raises(RuntimeError, match="compiling the MPC's NLP failed"):
+        jit_mod.compiled_nlpsol("mpc", "fatrop", {}, {}, reference)
