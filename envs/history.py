@@ -134,7 +134,8 @@ class PedHistory:
         ped_id = np.asarray(ped_id)
         out = np.empty((length, len(ped_id), 2))
         first = np.full(len(ped_id), length)
-        snaps = list(self._snaps)[-length:]
+        kept = list(self._snaps)
+        snaps = kept[-length:]
         row = length - 1
         for ids, pos in reversed(snaps):
             loc = np.clip(np.searchsorted(ids, ped_id), 0, max(len(ids) - 1, 0))
@@ -151,9 +152,8 @@ class PedHistory:
             first[found] = row
             row -= 1
         out[: row + 1] = out[row + 1]
-        kept = len(self._snaps)
-        if length < kept and (late := np.flatnonzero(first > 0)).size:  # seen in an older snapshot: no row is before
-            older = set().union(*(ids.tolist() for ids, _ in list(self._snaps)[: kept - length]))
+        if length < len(kept) and (late := np.flatnonzero(first > 0)).size:  # seen in an older snapshot: no row before
+            older = set().union(*(ids.tolist() for ids, _ in kept[: len(kept) - length]))
             first[[k for k in late.tolist() if int(ped_id[k]) in older]] = 0
         return out, first
 

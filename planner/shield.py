@@ -41,7 +41,7 @@ from functools import lru_cache
 import numpy as np
 
 from planner.config import MPCConfig, RobotConfig
-from planner.dynamics import _clip_one, clip_control, step_numpy
+from planner.dynamics import _clip1, _clip_one, clip_control, step_numpy
 from planner.prediction import PedPrediction, current_positions
 from planner.scene import resample_in_time, wall_clearance
 
@@ -121,16 +121,11 @@ def rollout_constant(state: np.ndarray, commands: np.ndarray, n_steps: int, dt_s
 
 
 def _ramp(v: float, u: float, n_steps: int, accel: float, lo: float, hi: float) -> list[float]:
-    """One velocity component under a constant command u: `clip_control`'s update on floats (`_clip1` inlined),
-    n_steps times; once an update leaves v as it was, it stays there."""
+    """One velocity component under a constant command u: `clip_control`'s update on floats (`_clip1`, as
+    `_clip_one` does it), n_steps times; once an update leaves v as it was, it stays there."""
     out: list[float] = []
     while len(out) < n_steps:
-        step = u - v
-        step = step if step > -accel else -accel
-        step = step if step < accel else accel
-        new = v + step
-        new = new if new > lo else lo
-        new = new if new < hi else hi
+        new = _clip1(v + _clip1(u - v, -accel, accel), lo, hi)
         if new == v and out:  # a fixed point (the sign of a zero aside, which the next update keeps too)
             return out + [new] * (n_steps - len(out))
         out.append(new)

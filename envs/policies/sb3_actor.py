@@ -8,11 +8,12 @@ tensors (the policy's own `extract_features`, `mlp_extractor.forward_actor` and 
 `predict`'s bit for bit (tests/envs/test_sb3_actor.py). Agents it does not cover (SAC, state-dependent exploration,
 squashed outputs, other distributions) get None, and their callers keep `model.predict`.
 
-Where the feature extractor is known to have no data-dependent branch (`TRACEABLE`: the project's crowd-attention
-extractor, SB3's flatten and combined ones) and the policy's MLP is SB3's, that forward pass is traced once with
-TorchScript (`torch.jit.trace`): the same kernels without the Python module calls, half the time (0.38 -> 0.19 ms
-p50 for `ppo-crowdnav-mix`, 2026-11-27) and the same floats (checked on two observations when traced, and in the
-tests on episodes of the packaged agents). Anything else, or a trace that fails or differs, keeps the eager pass.
+Where the feature extractor is known to have no data-dependent branch (a class that declares `traceable = True`
+itself, as the project's crowd-attention extractor does, or SB3's flatten and combined ones) and the policy's MLP is
+SB3's, that forward pass is traced once with TorchScript (`torch.jit.trace`): the same kernels without the Python module
+calls, half the time (0.38 -> 0.19 ms p50 for `ppo-crowdnav-mix`, 2026-11-27) and the same floats (checked on two
+observations when traced, and in the tests on episodes of the packaged agents). Anything else, or a trace that fails or
+differs, keeps the eager pass.
 """
 
 from __future__ import annotations
