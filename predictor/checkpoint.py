@@ -65,7 +65,8 @@ def read_file(path: str | Path) -> dict:
     try:
         obj = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises several types for truncated or foreign files
-        raise CheckpointError(f"cannot read checkpoint {path} (truncated or not a torch file?): {exc}") from None
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]  # torch's messages run to pages
+        raise CheckpointError(f"cannot read checkpoint {path} (truncated or not a torch file?): {first}") from None
     if not isinstance(obj, dict):
         raise CheckpointError(f"checkpoint {path} holds a {type(obj).__name__}, expected a dict")
     return obj

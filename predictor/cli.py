@@ -12,6 +12,8 @@ Examples::
         --group-threshold-scale 0.8
     gpgraph evaluate --checkpoint gpgraph-stgcnn-synthetic --data out/synthetic_predictor/data --group-mode average
     gpgraph predict --checkpoint gpgraph-stgcnn-hotel --history out/hist.npy --out out/pred.npz
+    gpgraph interpolate --start gpgraph-stgcnn-synthetic-conv --end runs/hotel-ft/best.pt --alpha 0.5 \
+        --out runs/hotel-wise50.pt
     gpgraph groups --groups ../shared/datasets/eth_ucy_groups --group-overlaps merge --absent-ids drop \
         --predictor gpgraph-stgcnn-synthetic --predictor 'gpgraph-stgcnn-{scene}+coherent-motion'
 """
@@ -139,6 +141,17 @@ def cmd_predict(args: argparse.Namespace) -> int:
             np.savez(fh, samples=pred.samples, mean=pred.mean, cov=pred.cov, group_id=pred.group_id)
     write_atomic(out, write)
     print(f"wrote {out}: samples {pred.samples.shape}, groups {pred.group_id.tolist()}")
+    return 0
+
+
+def cmd_interpolate(args: argparse.Namespace) -> int:
+    """Write (1 - alpha) * start + alpha * end (predictor.interpolate, WiSE-FT) as a checkpoint file."""
+    from predictor.interpolate import check_alpha, interpolate_checkpoints
+
+    out = _check_output_file(args.out, ".pt")
+    meta = interpolate_checkpoints(args.start, args.end, check_alpha(args.alpha), out)
+    print(f"wrote {out}: (1 - {args.alpha}) * {args.start} + {args.alpha} * {args.end} "
+          f"(epoch of end: {meta.get('epoch')})")
     return 0
 
 
@@ -350,6 +363,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="one latent per group (GP-Graph), per scene or per pedestrian; default: the model's")
     _group_calibration(r)
     r.set_defaults(func=cmd_predict)
+    i = sub.add_parser("interpolate", help="weights (1 - alpha) * START + alpha * END of a pretrained model and its "
+                       "fine-tuned copy (WiSE-FT; predictor.interpolate), written as a checkpoint")
+    i.add_argument("--start", required=True, metavar="CHECKPOINT",
+                   help="the pretrained model (packaged name or path), e.g. gpgraph-stgcnn-synthetic-conv")
+    i.add_argument("--end", required=True, metavar="CHECKPOINT",
+                   help="the same architecture fine-tuned from START (its config, grouping and meta are kept)")
+    i.add_argument("--alpha", type=float, required=True, help="0: START's weights, 1: END's (a number in [0, 1])")
+    i.add_argument("--out", type=Path, required=True, help="output checkpoint, must end in .pt")
+    i.set_defaults(func=cmd_interpolate)
     g = sub.add_parser("groups", help="grouping on real annotated people (validation): PW and G-MITRE of each "
                        "predictor's groups on every window of the recordings that GROUPS annotates")
     g.add_argument("--threads", type=int, default=1, help="torch CPU threads")
@@ -378,10 +400,11 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "list":
         return cmd_list(args)
-    if args.threads < 1:
+    threads = getattr(args, "threads", 1)  # interpolate has no --threads (nothing to compute in parallel)
+    if threads < 1:
         print("gpgraph: error: --threads must be >= 1", file=sys.stderr)
         return 2
-    torch.set_num_threads(args.threads)
+    torch.set_num_threads(threads)
     try:
         if hasattr(args, "device"):  # groups runs on the CPU
             args.device = resolve_device(args.device)  # before anything is read or written

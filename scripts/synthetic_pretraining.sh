@@ -8,12 +8,15 @@
 #   pretrainlow  (only with VARIANTS="pretrainlow") the same fine-tuning at lr 0.001 instead of 0.01;
 #   pretrainvlow (only with VARIANTS="pretrainvlow") at lr 0.0001;
 #   zeroshot  INIT itself, never trained on real people, grouping as the fine-tuned runs
-#             (connected components); zeroshotavg: the same with its packaged average-linkage grouping.
+#             (connected components); zeroshotavg: the same with its packaged average-linkage grouping;
+#   wise<100a>  (stage `interpolate`) the weights (1 - a) * INIT + a * each finished pretrainlow run, a in ALPHAS
+#             (WiSE-FT, predictor/interpolate.py; `gpgraph interpolate`); no training.
 # Every run keeps the checkpoint with the lowest validation loss; evaluation is the RESULTS.md protocol (test
 # split, seed 0, 10 trials, iid and paper). One thread per process, JOBS processes at a time.
 #   bash scripts/synthetic_pretraining.sh train SEED [SEED ...]    # trains the missing runs (VARIANTS=...)
+#   bash scripts/synthetic_pretraining.sh interpolate               # wise<100a> runs from the pretrainlow ones
 #   bash scripts/synthetic_pretraining.sh evaluate                  # evaluates every finished run + zero-shot
-#   bash scripts/synthetic_pretraining.sh validate                  # the same runs on the validation splits
+#   bash scripts/synthetic_pretraining.sh validate                  # the same runs on the validation splits (VARIANTS=...)
 #   bash scripts/synthetic_pretraining.sh report                    # the per-scene table (python)
 #   bash scripts/synthetic_pretraining.sh package                   # ships gpgraph-stgcnn-<scene>-pretrained
 # The runs in RESULTS.md started from the gpgraph-stgcnn-synthetic of commit 438cd77 (the conv assigner, trained on
@@ -62,6 +65,21 @@ case $stage in
       echo "$variant $scene $seed"
     done; done; done | xargs -P "$jobs" -L 1 bash -c 'train_one "$0" "$1" "$2"'
     ;;
+  interpolate)  # WiSE-FT between INIT and every finished pretrainlow run; ALPHAS in (0, 1), default 0.25 0.5 0.75
+    for run in "$out"/runs/pretrainlow-*-s*/; do
+      [ -f "$run/done" ] || continue
+      for a in ${ALPHAS:-0.25 0.5 0.75}; do
+        name=$(basename "$run"); pct=$("$py" -c "print(round(100 * float('$a')))")
+        dest="$out/runs/wise$pct-${name#pretrainlow-}"
+        [ -f "$dest/done" ] && continue
+        mkdir -p "$dest"
+        "$py" -m predictor.cli interpolate --start "$INIT" --end "$run/best.pt" --alpha "$a" --out "$dest/best.pt" \
+          > /dev/null
+        touch "$dest/done"
+        echo "interpolated $dest"
+      done
+    done
+    ;;
   evaluate)
     {
       for scene in $scenes; do for protocol in iid paper; do
@@ -81,6 +99,7 @@ case $stage in
     for run in "$out"/runs/*-s*/; do
       [ -f "$run/done" ] || continue
       name=$(basename "$run"); scene=${name#*-}; scene=${scene%-s*}
+      [ -n "${VARIANTS:-}" ] && [[ " $VARIANTS " != *" ${name%%-*} "* ]] && continue  # only these variants
       echo "$run $scene $name"
     done | xargs -P "$jobs" -L 1 bash -c 'f="$out/val/$2-iid.json"; [ -f "$f" ] || "$py" -m predictor.cli evaluate \
       --threads 1 --checkpoint "$0/best.pt" --data "$data/$1" --split val --protocol iid --seed 0 --trials 3 --quiet \
@@ -89,16 +108,19 @@ case $stage in
   report)
     "$py" scripts/synthetic_pretraining_report.py "$out/eval"
     ;;
-  package)  # pretrainlow (lr 0.001: the leave-one-scene-out choice in `report`), the seed with the best val FDE
+  package)  # per scene the variant chosen leave-one-scene-out in `report` (mean of the iid and paper FDE on the
+            # other four scenes), the seed with the best validation FDE (`validate`)
     for scene in $scenes; do
-      seed=$("$py" scripts/synthetic_pretraining_report.py best-seed "$out/val" pretrainlow "$scene")
-      "$py" scripts/package_checkpoint.py "$out/runs/pretrainlow-$scene-s$seed/best.pt" \
+      variant=$("$py" scripts/synthetic_pretraining_report.py choose "$out/eval" "$scene")
+      seed=$("$py" scripts/synthetic_pretraining_report.py best-seed "$out/val" "$variant" "$scene")
+      "$py" scripts/package_checkpoint.py "$out/runs/$variant-$scene-s$seed/best.pt" \
         "predictor/checkpoints/gpgraph-stgcnn-$scene-pretrained.safetensors" --scene "$scene" --data "$data/$scene" \
-        --note "crowdsim-pretrained (gpgraph-stgcnn-synthetic of commit 438cd77), fine-tuned $epochs epochs at lr 0.001 \
-(chosen leave-one-scene-out), seed $seed of 0-2 by validation FDE; RESULTS.md 'What crowdsim pretraining buys'"
+        --note "crowdsim-pretrained ($INIT), fine-tuned $epochs epochs at lr 0.001, variant $variant (wise<100a>: \
+weights (1 - a) * $INIT + a * fine-tuned) chosen leave-one-scene-out on the other scenes' test FDE, seed $seed of 0-2 \
+by validation FDE; RESULTS.md 'What crowdsim pretraining buys'"
     done
     ;;
   *)
-    echo "usage: $0 train SEED [SEED ...] | evaluate | validate | report | package" >&2; exit 2
+    echo "usage: $0 train SEED [SEED ...] | interpolate | evaluate | validate | report | package" >&2; exit 2
     ;;
 esac

@@ -12,6 +12,12 @@ scene's choice sees its own test data, and prints the chosen family's five-scene
     python scripts/synthetic_pretraining_report.py best-seed out/synthetic_pretraining/val pretrainlow eth
 
 prints the seed with the lowest validation FDE (the `validate` stage), which `package` ships.
+
+    python scripts/synthetic_pretraining_report.py choose out/synthetic_pretraining/eval eth
+
+prints the variant `package` ships for a scene: among the runs on disk (pretrainlow and the WiSE-FT wise<100a>, every
+seed evaluated in every scene under both protocols), the one with the lowest mean of the iid and paper FDE over the
+other four scenes (each protocol's mean over scenes and seeds first), so no scene's choice sees its own test data.
 """
 
 from __future__ import annotations
@@ -25,9 +31,13 @@ from pathlib import Path
 import numpy as np
 
 SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
-VARIANTS = ("real", "pretrain", "pretrainlow", "pretrainvlow", "zeroshot", "zeroshotavg")
-FINE_TUNED = ("pretrain", "pretrainlow", "pretrainvlow", "zeroshot")  # lr 0.01, 0.001, 0.0001, none (lr 0)
-NAME = re.compile(r"^(real|pretrain|pretrainlow|pretrainvlow|zeroshot|zeroshotavg)-(\w+?)(?:-s(\d+))?-(iid|paper)$")
+WISE = tuple(f"wise{a}" for a in range(1, 100))  # (1 - a/100) * zero-shot + a/100 * pretrainlow (predictor.interpolate)
+VARIANTS = ("real", "pretrain", "pretrainlow", "pretrainvlow", "zeroshot", "zeroshotavg", *WISE)
+# lr 0.01, 0.001, 0.0001, none (lr 0), and the interpolations between none and 0.001
+FINE_TUNED = ("pretrain", "pretrainlow", "pretrainvlow", "zeroshot", *WISE)
+SHIPPABLE = ("pretrainlow", *WISE)  # variants with a checkpoint of their own under runs/
+NAME = re.compile(r"^(real|pretrain|pretrainlow|pretrainvlow|zeroshot|zeroshotavg|wise\d\d?)-(\w+?)(?:-s(\d+))?"
+                  r"-(iid|paper)$")
 
 
 def load(folder: Path) -> dict[tuple[str, str, str], dict[int, tuple[float, float]]]:
@@ -66,6 +76,8 @@ def table(res: dict, protocol: str) -> list[str]:
     lines = [f"### Protocol {protocol}: ADE/FDE (m), mean ± sd over seeds", "",
              "| variant | " + " | ".join(SCENES) + " | average (seeds) |", "|---" * (len(SCENES) + 2) + "|"]
     for v in VARIANTS:
+        if not any((v, s, protocol) in res for s in SCENES):
+            continue
         row = [cell(res.get((v, s, protocol), {})) for s in SCENES]
         seeds = sorted(set.intersection(*[set(res.get((v, s, protocol), {})) for s in SCENES]))
         avg = "–"
@@ -125,7 +137,24 @@ def best_seed(val_dir: Path, variant: str, scene: str) -> int:
     return min(scores, key=scores.get)
 
 
-USAGE = "usage: synthetic_pretraining_report.py EVAL_DIR | best-seed VAL_DIR VARIANT SCENE"
+def choose(res: dict, scene: str) -> str:
+    """The shippable variant with the lowest mean of (iid, paper) FDE over the scenes other than ``scene``."""
+    def complete(v: str) -> bool:
+        seeds = [set(res.get((v, s, p), {})) for s in SCENES for p in ("iid", "paper")]
+        return bool(seeds[0]) and all(x == seeds[0] for x in seeds)
+
+    def score(v: str) -> float:
+        return float(np.mean([np.mean([f for o in SCENES if o != scene for _, f in res[(v, o, p)].values()])
+                              for p in ("iid", "paper")]))
+
+    candidates = [v for v in SHIPPABLE if complete(v)]
+    if not candidates:
+        raise SystemExit(f"no variant of {SHIPPABLE[:2]}... evaluated in every scene under both protocols")
+    return min(candidates, key=score)
+
+
+USAGE = ("usage: synthetic_pretraining_report.py EVAL_DIR | best-seed VAL_DIR VARIANT SCENE | "
+         "choose EVAL_DIR SCENE")
 
 
 def main(argv: list[str]) -> int:
@@ -134,6 +163,9 @@ def main(argv: list[str]) -> int:
         return 0
     if len(argv) == 4 and argv[0] == "best-seed":
         print(best_seed(Path(argv[1]), argv[2], argv[3]))
+        return 0
+    if len(argv) == 3 and argv[0] == "choose" and argv[2] in SCENES:
+        print(choose(load(Path(argv[1])), argv[2]))
         return 0
     if len(argv) != 1 or not Path(argv[0]).is_dir():
         print(USAGE, file=sys.stderr)
