@@ -70,7 +70,12 @@ def _data(meta: dict[str, Any]) -> str:
         text = f"ETH/UCY minus {scene} (leave-one-out: {scene} is its test scene)"
     else:
         text = f"scene {scene or 'unknown'}"
-    return f"{text}, fine-tuned from {init}" if init else text
+    text = f"{text}, fine-tuned from {init}" if init else text
+    mix = meta.get("interpolation")
+    if isinstance(mix, dict) and "alpha" in mix:  # predictor.interpolate (WiSE-FT)
+        a = float(mix["alpha"])
+        text += f", then weights {1 - a:g} x {mix.get('start')} + {a:g} x the fine-tuned ones"
+    return text
 
 
 def _metrics(meta: dict[str, Any]) -> str:
@@ -79,7 +84,8 @@ def _metrics(meta: dict[str, Any]) -> str:
     if loss is None:
         return ""
     kept = f"epoch {epoch} of {epochs}" if epochs else f"epoch {epoch}"
-    return f"val loss {loss:.3f} ({kept} kept)"
+    whose = "the fine-tuned run's " if "interpolation" in meta else ""
+    return f"{whose}val loss {loss:.3f} ({kept} kept)"
 
 
 def catalog(checkpoints: Path = PACKAGE_CHECKPOINTS) -> list[tuple[str, str]]:

@@ -35,6 +35,11 @@ def test_each_description_states_backbone_data_and_validation_loss(name):
     assert meta["scene"] in text
     assert f"val loss {meta['val_loss']:.3f} (epoch {meta['epoch']} of {meta['train']['epochs']} kept)" in text
     assert ("fine-tuned from gpgraph-stgcnn-synthetic" in text) == name.endswith("-pretrained")
+    mix = meta.get("interpolation")  # WiSE-FT (predictor.interpolate): the weights' mixture is stated
+    assert (mix is not None) == name.endswith("-pretrained")
+    if mix:
+        assert f"then weights {1 - mix['alpha']:g} x {mix['start']} + {mix['alpha']:g} x the fine-tuned" in text
+        assert "the fine-tuned run's val loss" in text
 
 
 def test_roles_name_the_default_predictor_of_the_env():
