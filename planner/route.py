@@ -8,7 +8,9 @@ a subgoal (a "carrot") on a shortest path through the walls instead:
   cells at least the MPC's wall clearance (robot radius + wall margin) from every wall segment. Each step costs
   its length times (1 + `clearance_weight` * max(0, `comfort_m` - clearance) / `comfort_m`), so the path keeps to
   the middle of doors and corridors. Solved with scipy's Dijkstra (imported only when a route is searched) once
-  per goal and wall map.
+  per goal and wall map. The grid itself (every cell's wall clearance, ~50 ms for a crowdnav-v1 room, and the
+  graph) depends only on the walls and the lattice, so a `Router` keeps them (`GridCache`) and a search from
+  elsewhere in the same room reuses them: the same arrays, so the same path.
 * `Router.subgoal`: where the goal is in sight (the straight segment keeps the clearance from every wall), the goal
   itself, so that scenes without walls in the way plan exactly as without a router. Otherwise the farthest path
   point within `lookahead_m` (along the path, from the point nearest the robot) that the robot can see, slid
@@ -21,12 +23,73 @@ Units: metres. Walls are segments (W, 4) x0, y0, x1, y1, as everywhere in the pl
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from planner.config import RouteConfig
 from planner.scene import wall_clearance
 
 NEIGHBOURS = ((1, 0), (0, 1), (1, 1), (1, -1))  # half of the 8 neighbours; edges are undirected
+GRID_CACHE_SIZE = 4  # grids a GridCache keeps (one per wall map and lattice; an env has one wall map)
+CLEARANCE_SLACK_CELLS = 40  # a clearance field is computed this many cells beyond the grid asked for (+x and +y)
+
+
+@dataclass(frozen=True)
+class RouteGrid:
+    """The search grid of one wall map and lattice: cell centres (nx, ny, 2) m, each cell's wall clearance
+    (nx, ny) m, the free cells (nx, ny) bool and the weighted graph over them (scipy CSR, nx * ny nodes)."""
+
+    centres: np.ndarray
+    clear: np.ndarray
+    free: np.ndarray
+    graph: object
+
+
+class GridCache:
+    """What a route search among the same walls can reuse, the newest GRID_CACHE_SIZE of each kind: whole grids by
+    (walls, lattice origin and size, settings), and wall-clearance fields by (walls, origin, cell), computed
+    CLEARANCE_SLACK_CELLS beyond the size asked for, so that a robot straying out of the walls' box (which grows
+    the grid) needs a new graph but not a new field. Exact keys (the bytes of the walls and of the origin); a cell's
+    clearance does not depend on the size of the field it is computed in (tested), so a hit returns exactly what a
+    new build would compute."""
+
+    def __init__(self) -> None:
+        self.grids: dict[tuple, RouteGrid] = {}
+        self.fields: dict[tuple, np.ndarray] = {}
+
+    @staticmethod
+    def _keep(store: dict, key: tuple, value) -> None:
+        store.pop(key, None)
+        while len(store) >= GRID_CACHE_SIZE:
+            store.pop(next(iter(store)))
+        store[key] = value  # newest last
+
+    def clearance(self, lo: np.ndarray, shape: tuple[int, int], walls: np.ndarray, cell_m: float) -> np.ndarray:
+        """(nx, ny) wall clearance (m) of the cells lo + cell_m * (i, j)."""
+        key = (lo.tobytes(), walls.tobytes(), cell_m)
+        field = self.fields.get(key)
+        if field is None or field.shape[0] < shape[0] or field.shape[1] < shape[1]:
+            big = (shape[0] + CLEARANCE_SLACK_CELLS, shape[1] + CLEARANCE_SLACK_CELLS)
+            if field is not None:
+                big = (max(big[0], field.shape[0]), max(big[1], field.shape[1]))
+            field = wall_clearance(_centres(lo, big, cell_m), walls)
+            field.setflags(write=False)
+            self._keep(self.fields, key, field)
+        return field[: shape[0], : shape[1]]
+
+    def grid(self, key: tuple, build) -> RouteGrid:
+        grid = self.grids.get(key)
+        if grid is None:
+            grid = build()
+            self._keep(self.grids, key, grid)
+        return grid
+
+
+def _centres(lo: np.ndarray, shape: tuple[int, int], cell_m: float) -> np.ndarray:
+    """(nx, ny, 2) m: the cell centres lo + cell_m * (i, j)."""
+    xs, ys = lo[0] + cell_m * np.arange(shape[0]), lo[1] + cell_m * np.arange(shape[1])
+    return np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
 
 
 def in_sight(start: np.ndarray, ends: np.ndarray, walls: np.ndarray, clearance_m: float, step_m: float) -> np.ndarray:
@@ -44,11 +107,11 @@ def in_sight(start: np.ndarray, ends: np.ndarray, walls: np.ndarray, clearance_m
 
 
 def grid_route(start: np.ndarray, goal: np.ndarray, walls: np.ndarray, cfg: RouteConfig,
-               clearance_m: float) -> np.ndarray | None:
+               clearance_m: float, cache: GridCache | None = None) -> np.ndarray | None:
     """A shortest path (P, 2) m from start to goal through the free grid cells, those at least clearance_m from
     every wall (see the module docstring): from the start's cell to the goal's, with start and goal themselves as
     its ends; None when no path exists. A start or goal cell inside the walls' clearance is joined to its nearest
-    free cell."""
+    free cell. ``cache`` keeps the grid for later searches among the same walls on the same lattice."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     pts = np.vstack([walls[:, :2], walls[:, 2:], start, goal]) if len(walls) else np.vstack([start, goal])
     lo, hi = pts.min(0) - cfg.padding_m, pts.max(0) + cfg.padding_m
@@ -56,27 +119,42 @@ def grid_route(start: np.ndarray, goal: np.ndarray, walls: np.ndarray, cfg: Rout
     if nx * ny > cfg.max_cells:
         raise ValueError(f"route grid of {nx} x {ny} cells exceeds RouteConfig.max_cells={cfg.max_cells}; "
                          "raise cell_m")
-    xs, ys = lo[0] + cfg.cell_m * np.arange(nx), lo[1] + cfg.cell_m * np.arange(ny)
-    centres = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)  # (nx, ny, 2)
-    clear = wall_clearance(centres, walls)
-    free = clear >= clearance_m
-    ends = [_nearest_free(p, lo, cfg.cell_m, centres, free) for p in (start, goal)]
+    walls = np.ascontiguousarray(walls, float)
+    shape = (int(nx), int(ny))
+
+    def build() -> RouteGrid:
+        clear = wall_clearance(_centres(lo, shape, cfg.cell_m), walls) if cache is None else \
+            cache.clearance(lo, shape, walls, cfg.cell_m)
+        return _build_grid(lo, clear, cfg, clearance_m)
+
+    key = (lo.tobytes(), shape, walls.tobytes(), cfg, float(clearance_m))
+    grid = build() if cache is None else cache.grid(key, build)
+    ends = [_nearest_free(p, lo, cfg.cell_m, grid.centres, grid.free) for p in (start, goal)]
     if ends[0] is None or ends[1] is None:
         return None
-    penalty = 1.0 + cfg.clearance_weight * np.clip(cfg.comfort_m - clear, 0.0, None) / cfg.comfort_m
     from scipy.sparse.csgraph import dijkstra  # imported here: `import planner` stays numpy + casadi
 
-    graph = _grid_graph(free, penalty, cfg.cell_m)
     index = np.arange(nx * ny).reshape(nx, ny)
     src, dst = index[ends[0]], index[ends[1]]
-    dist, pred = dijkstra(graph, directed=False, indices=src, return_predecessors=True)
+    dist, pred = dijkstra(grid.graph, directed=False, indices=src, return_predecessors=True)
     if not np.isfinite(dist[dst]):
         return None
     cells = [dst]
     while cells[-1] != src:
         cells.append(pred[cells[-1]])
-    path = centres.reshape(-1, 2)[np.array(cells[::-1])]
+    path = grid.centres.reshape(-1, 2)[np.array(cells[::-1])]
     return np.vstack([start, path, goal])
+
+
+def _build_grid(lo: np.ndarray, clear: np.ndarray, cfg: RouteConfig, clearance_m: float) -> RouteGrid:
+    """The grid of clear.shape cells from ``lo`` (2,) m with wall clearances ``clear`` (nx, ny) m: free cells and
+    the weighted graph."""
+    centres = _centres(lo, clear.shape, cfg.cell_m)
+    free = clear >= clearance_m
+    penalty = 1.0 + cfg.clearance_weight * np.clip(cfg.comfort_m - clear, 0.0, None) / cfg.comfort_m
+    for a in (centres, free):
+        a.setflags(write=False)  # shared by later searches
+    return RouteGrid(centres, clear, free, _grid_graph(free, penalty, cfg.cell_m))
 
 
 def _nearest_free(p: np.ndarray, lo: np.ndarray, cell_m: float, centres: np.ndarray,
@@ -120,6 +198,7 @@ class Router:
         self._path: np.ndarray | None = None  # (P, 2) m
         self._arc: np.ndarray | None = None  # (P,) m, arc length along the path
         self._failed_at: np.ndarray | None = None  # (2,) m, where the last search for this key found no route
+        self.grids = GridCache()  # kept through reset(): keyed by the walls themselves
 
     def reset(self) -> None:
         self._key, self._path, self._arc, self._failed_at = None, None, None, None
@@ -138,7 +217,7 @@ class Router:
             return goal  # no route from here a moment ago: search again only once the robot has moved on
         near = self._nearest(position) if key == self._key else None
         if near is None or np.linalg.norm(self._path[near] - position) > cfg.replan_distance_m:
-            self._key, self._path = key, grid_route(position, goal, walls, cfg, self.clearance_m)
+            self._key, self._path = key, grid_route(position, goal, walls, cfg, self.clearance_m, self.grids)
             self._failed_at = None if self._path is not None else position.copy()
             if self._path is None:
                 return goal

@@ -108,3 +108,39 @@ def test_without_them_the_mpc_does_not_find_the_door():
         states, _ = _through_the_door(**kwargs)
         through_door = (states[:, 0] > 8.0) & (np.abs(states[:, 1] - 4.0) < 0.5)
         assert not through_door.any(), kwargs
+
+
+def test_the_cached_grid_gives_the_same_paths_as_a_fresh_search(monkeypatch):
+    """A Router keeps the grid (GridCache): searches from many places, some outside the walls' box (a grown lattice),
+    return exactly the paths a search without a cache returns, and the clearance field is computed once for them."""
+    import planner.route as route
+
+    fields = []
+    real = route.wall_clearance
+    monkeypatch.setattr(route, "wall_clearance", lambda p, w: (fields.append(np.shape(p)), real(p, w))[1])
+    cache, cfg = route.GridCache(), RouteConfig()
+    starts = [IN_ROOM, np.array([1.0, 7.0]), np.array([4.0, 4.0]), np.array([3.0, 8.6]), np.array([2.0, 9.0])]
+    for start in starts:
+        for goal in (OUTSIDE, np.array([9.5, 4.0])):
+            cached = grid_route(start, goal, DOOR_WALLS, cfg, CLEAR_M, cache)
+            fields_before = len(fields)
+            fresh = grid_route(start, goal, DOOR_WALLS, cfg, CLEAR_M)
+            assert len(fields) == fields_before + 1  # no cache: its own field
+            np.testing.assert_array_equal(cached, fresh)
+    grids = [s for s in fields if len(s) == 3]  # the (nx, ny, 2) fields, not the in-sight checks
+    assert len(grids) == 1 + len(starts) * 2  # the cache's one field (grown once up front), plus each fresh search's
+
+
+def test_a_cached_field_slice_equals_the_field_computed_at_its_own_size():
+    import planner.route as route
+
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        walls = rng.uniform(-8.0, 8.0, (int(rng.integers(1, 10)), 4))
+        lo, cell = rng.uniform(-10.0, -9.0, 2), 0.1
+        cache = route.GridCache()
+        big = tuple(int(v) for v in rng.integers(60, 160, 2))
+        cache.clearance(lo, big, walls, cell)
+        small = tuple(int(v) - int(rng.integers(0, 50)) for v in big)
+        np.testing.assert_array_equal(cache.clearance(lo, small, walls, cell),
+                                      route.wall_clearance(route._centres(lo, small, cell), walls))
