@@ -12,7 +12,7 @@ Examples::
         --group-threshold-scale 0.8
     gpgraph evaluate --checkpoint gpgraph-stgcnn-synthetic --data out/synthetic_predictor/data --group-mode average
     gpgraph predict --checkpoint gpgraph-stgcnn-hotel --history out/hist.npy --out out/pred.npz
-    gpgraph interpolate --start gpgraph-stgcnn-synthetic-conv --end runs/hotel-ft/best.pt --alpha 0.5 \
+    gpgraph interpolate --start gpgraph-stgcnn-synthetic-conv --end runs/hotel/best.pt --alpha 0.5 \
         --out runs/hotel-wise50.pt
     gpgraph groups --groups ../shared/datasets/eth_ucy_groups --group-overlaps merge --absent-ids drop \
         --predictor gpgraph-stgcnn-synthetic --predictor 'gpgraph-stgcnn-{scene}+coherent-motion'
