@@ -21,8 +21,8 @@ import torch
 
 from predictor.checkpoint import CheckpointError, load_model, save_model
 from predictor.model import GPGraph
+from predictor.train import architecture_differences
 
-LOSS_ONLY_FIELDS = ("bce_weight",)  # as in predictor.train: fields that change the loss, not the weights' layout
 META_INTERPOLATION = "interpolation"
 
 
@@ -34,17 +34,12 @@ def check_alpha(alpha: float) -> float:
     return a
 
 
-def _architecture(model: GPGraph) -> dict:
-    return {k: v for k, v in model.config.to_dict().items() if k not in LOSS_ONLY_FIELDS}
-
-
 def interpolate_models(start: GPGraph, end: GPGraph, alpha: float) -> dict[str, torch.Tensor]:
     """The state dict ``(1 - alpha) * start + alpha * end`` (float tensors; any other dtype must be equal in both
     and is taken from ``end``). ValueError when the architectures, names or shapes differ."""
     alpha = check_alpha(alpha)
-    a, b = _architecture(start), _architecture(end)
-    if a != b:
-        diff = ", ".join(f"{k} {a.get(k)!r} vs {b.get(k)!r}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k))
+    diff = architecture_differences(start.config, end.config)
+    if diff:
         raise ValueError(f"cannot interpolate models of different architectures: {diff}")
     sa, sb = start.state_dict(), end.state_dict()
     if set(sa) != set(sb):

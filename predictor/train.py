@@ -245,13 +245,20 @@ def initial_weights(model: GPGraph, init: str) -> None:
     from predictor.checkpoint import load_model
 
     source, _ = load_model(init)
-    mine = {k: v for k, v in model.config.to_dict().items() if k not in LOSS_ONLY_FIELDS}
-    theirs = {k: v for k, v in source.config.to_dict().items() if k not in LOSS_ONLY_FIELDS}
-    if mine != theirs:
-        diff = ", ".join(f"{k} {theirs.get(k)!r} (init) vs {mine.get(k)!r}" for k in sorted(set(mine) | set(theirs))
-                         if mine.get(k) != theirs.get(k))
+    diff = architecture_differences(source.config, model.config, "(init)")
+    if diff:
         raise ValueError(f"--init {init}: architecture differs: {diff}")
     model.load_state_dict(source.state_dict())
+
+
+def architecture_differences(a: GPGraphConfig, b: GPGraphConfig, a_label: str = "") -> str:
+    """'' when ``a`` and ``b`` lay out the same weights (every field but LOSS_ONLY_FIELDS equal), else the differing
+    fields as "name A_value[ a_label] vs B_value, ..."."""
+    mine = {k: v for k, v in b.to_dict().items() if k not in LOSS_ONLY_FIELDS}
+    theirs = {k: v for k, v in a.to_dict().items() if k not in LOSS_ONLY_FIELDS}
+    label = f" {a_label}" if a_label else ""
+    return ", ".join(f"{k} {theirs.get(k)!r}{label} vs {mine.get(k)!r}" for k in sorted(set(mine) | set(theirs))
+                     if mine.get(k) != theirs.get(k))
 
 
 def train(
