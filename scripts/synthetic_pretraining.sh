@@ -19,9 +19,11 @@
 #   bash scripts/synthetic_pretraining.sh validate                  # the same runs on the validation splits (VARIANTS=...)
 #   bash scripts/synthetic_pretraining.sh report                    # the per-scene table (python)
 #   bash scripts/synthetic_pretraining.sh package                   # ships gpgraph-stgcnn-<scene>-pretrained
-# The runs in RESULTS.md started from the gpgraph-stgcnn-synthetic of commit 438cd77 (the conv assigner, trained on
-# crowdsim before the group catch-up term); `git show 438cd77:predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors`
-# gets it (INIT=PATH to use it).
+# The 2026-11-23 runs in RESULTS.md started from the gpgraph-stgcnn-synthetic of commit 438cd77 (the conv assigner,
+# trained on crowdsim before the group catch-up term; `git show 438cd77:predictor/checkpoints/gpgraph-stgcnn-synthetic.safetensors`
+# gets it, INIT=PATH uses it); those of 2026-11-26/27 and the packaged -pretrained version 2 from the default INIT,
+# gpgraph-stgcnn-synthetic-conv (OUT=out/s10/ft EPOCHS=40, then interpolate, evaluate, VARIANTS="wise50 wise75" validate,
+# package).
 # Outputs under OUT (default out/synthetic_pretraining): runs/<variant>-<scene>-s<seed>/, eval/*.json.
 set -euo pipefail
 stage=$1; shift
