@@ -123,9 +123,9 @@ def grid_route(start: np.ndarray, goal: np.ndarray, walls: np.ndarray, cfg: Rout
     shape = (int(nx), int(ny))
 
     def build() -> RouteGrid:
-        clear = wall_clearance(_centres(lo, shape, cfg.cell_m), walls) if cache is None else \
-            cache.clearance(lo, shape, walls, cfg.cell_m)
-        return _build_grid(lo, clear, cfg, clearance_m)
+        centres = _centres(lo, shape, cfg.cell_m)
+        clear = wall_clearance(centres, walls) if cache is None else cache.clearance(lo, shape, walls, cfg.cell_m)
+        return _build_grid(centres, clear, cfg, clearance_m)
 
     key = (lo.tobytes(), shape, walls.tobytes(), cfg, float(clearance_m))
     grid = build() if cache is None else cache.grid(key, build)
@@ -146,10 +146,9 @@ def grid_route(start: np.ndarray, goal: np.ndarray, walls: np.ndarray, cfg: Rout
     return np.vstack([start, path, goal])
 
 
-def _build_grid(lo: np.ndarray, clear: np.ndarray, cfg: RouteConfig, clearance_m: float) -> RouteGrid:
-    """The grid of clear.shape cells from ``lo`` (2,) m with wall clearances ``clear`` (nx, ny) m: free cells and
-    the weighted graph."""
-    centres = _centres(lo, clear.shape, cfg.cell_m)
+def _build_grid(centres: np.ndarray, clear: np.ndarray, cfg: RouteConfig, clearance_m: float) -> RouteGrid:
+    """The grid of cells ``centres`` (nx, ny, 2) m with wall clearances ``clear`` (nx, ny) m: free cells and the
+    weighted graph."""
     free = clear >= clearance_m
     penalty = 1.0 + cfg.clearance_weight * np.clip(cfg.comfort_m - clear, 0.0, None) / cfg.comfort_m
     for a in (centres, free):

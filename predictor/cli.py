@@ -146,10 +146,10 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 def cmd_interpolate(args: argparse.Namespace) -> int:
     """Write (1 - alpha) * start + alpha * end (predictor.interpolate, WiSE-FT) as a checkpoint file."""
-    from predictor.interpolate import check_alpha, interpolate_checkpoints
+    from predictor.interpolate import interpolate_checkpoints
 
     out = _check_output_file(args.out, ".pt")
-    meta = interpolate_checkpoints(args.start, args.end, check_alpha(args.alpha), out)
+    meta = interpolate_checkpoints(args.start, args.end, args.alpha, out)  # checks alpha before reading anything
     print(f"wrote {out}: (1 - {args.alpha}) * {args.start} + {args.alpha} * {args.end} "
           f"(epoch of end: {meta.get('epoch')})")
     return 0
