@@ -23,6 +23,9 @@ samples it did not keep, a pedestrian can still reach the robot. The shield clos
    normalised distance from it: an evasive manoeuvre is kept unless another is clearly safer. A candidate whose
    body would touch a wall within the look-ahead is taken only when every candidate would (before 2026-11-25 wall
    contact was one more soft violation, and in dense corridors the shield steered the robot into the wall).
+   With ``shield_group_weight`` > 0 and the pedestrians' group ids, every candidate also pays that weight times its
+   discounted shortfall below ``shield_group_margin_m`` from each predicted group's region (`group_violations`), so
+   that among commands about as safe the one passing round a group wins over the one cutting through it.
 
 With ``shield_cv`` (default) the pedestrians' last observed velocity, held over the look-ahead, is one more
 future that counts as certain (risk 1 when hit): at this range constant velocity is hard to beat, and a learned
@@ -43,7 +46,7 @@ import numpy as np
 from planner.config import MPCConfig, RobotConfig
 from planner.dynamics import _clip1, _clip_one, clip_control, step_numpy
 from planner.prediction import PedPrediction, current_positions
-from planner.scene import resample_in_time, wall_clearance
+from planner.scene import group_capsules, resample_in_time, wall_clearance
 
 N_SPEEDS = 5  # candidate forward speeds (unicycle) / speed magnitudes (holonomic), rest excluded
 N_TURNS = 9  # candidate yaw rates (unicycle) / directions (holonomic: 2 * N_TURNS)
@@ -259,6 +262,29 @@ def touches_wall(robot_xy: np.ndarray | None, walls: np.ndarray | None, robot_ra
     return ((wall_clearance(robot_xy, walls) if wall_m is None else wall_m) < robot_radius).any(-1)
 
 
+def group_violations(xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, group_ids: np.ndarray,
+                     weights: np.ndarray, cfg: MPCConfig) -> np.ndarray:
+    """(C,) discounted shortfall (m) of roll-outs xy (C, T, 2) below ``cfg.shield_group_margin_m`` from the regions
+    of the groups in futures (K, T, n, 2) m with radii (n,) m and group_ids (n,): per group of >= 2 members, the
+    capsule of their discs at each (sample, time) as the MPC's group constraint builds it (`group_capsules`), skipped
+    where it is wider than ``cfg.max_group_span_m``; summed over groups of ``mean_k sum_t weights_t relu(shortfall)``
+    with weights (T,)."""
+    total = np.zeros(len(xy))
+    for gid in np.unique(group_ids):
+        members = np.flatnonzero(group_ids == gid)
+        if len(members) < 2:
+            continue
+        a, b, rad = group_capsules(futures[:, :, members], radii[members])  # (K, T, 2), (K, T, 2), (K, T)
+        ab = b - a
+        rel = xy[:, None] - a  # (C, K, T, 2)
+        t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+        gap = np.linalg.norm(rel - t[..., None] * ab, axis=-1) - rad - cfg.robot.radius_m  # (C, K, T)
+        short = np.where(np.linalg.norm(ab, axis=-1) > cfg.max_group_span_m, 0.0,
+                         np.maximum(cfg.shield_group_margin_m - gap, 0.0))
+        total += (short * weights).sum(-1).mean(-1)
+    return total
+
+
 def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
                    walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None) -> ShieldVerdict:
     """Check the plan's controls (H, 2) (each held ``cfg.dt_s``; the first is the one to apply) from ``state``
@@ -266,21 +292,24 @@ def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPredic
     when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring). ``previous`` (2,): the command
     the shield applied at the previous step, if it replaced the plan's control there."""
     futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, horizon_steps(cfg), cfg.shield_cv)
-    return shield_futures(state, planned, futures, radii, walls, cfg, previous, certain_last=has_cv)
+    groups = np.asarray(prediction.group_ids)[np.asarray(prediction.mask, bool)] if cfg.shield_group_weight else None
+    return shield_futures(state, planned, futures, radii, walls, cfg, previous, certain_last=has_cv, group_ids=groups)
 
 
 def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, radii: np.ndarray,
                    walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None,
-                   certain_last: bool = False) -> ShieldVerdict:
+                   certain_last: bool = False, group_ids: np.ndarray | None = None) -> ShieldVerdict:
     """`shield_control` on the pedestrians' futures (K, T, n, 2) m at the shield's own times (+shield_dt_s ..
     +T shield_dt_s, T = `horizon_steps(cfg)`) with radii (n,) m; `certain_last`: the last future counts as certain
-    (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1."""
+    (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1. `group_ids` (n,):
+    the pedestrians' groups, for ``cfg.shield_group_weight`` (None: groups ignored)."""
     n_steps = horizon_steps(cfg)
     planned = np.asarray(planned, float)
     cands = candidate_controls(cfg.robot, planned[0])
     near = within_reach(np.asarray(state, float)[:2], futures, radii, cfg)
     # walls: the MPC's wall margin while nobody is within reach, else the pedestrians' (see the module docstring)
     wall_slack = 0.0 if near.any() else cfg.shield_margin_m - (cfg.wall_clearance_m - cfg.robot.radius_m)
+    all_futures, all_radii = futures, radii  # a group's region spans its members within reach and beyond
     futures, radii = futures[:, :, near], radii[near]
     n_sampled = len(futures) - certain_last
 
@@ -303,7 +332,8 @@ def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, 
     wall0, short0, risk0 = check(xy0)
     if risk0[0] <= cfg.shield_max_risk:
         return ShieldVerdict(cands[0].copy(), float(risk0[0]), False, float(risk0[0]))
-    wall_m, short, risk = check(rollout_constant(state, cands[1:], n_steps, cfg.shield_dt_s, cfg.robot))
+    xy = rollout_constant(state, cands[1:], n_steps, cfg.shield_dt_s, cfg.robot)
+    wall_m, short, risk = check(xy)
     wall_m, short, risk = (np.concatenate(pair) for pair in ((wall0, wall_m), (short0, short), (risk0, risk)))
     weights = np.exp(-cfg.shield_dt_s * np.arange(1, n_steps + 1) / cfg.shield_tau_s)
     violation = (np.maximum(short, 0.0) * weights).sum(-1).mean(-1)
@@ -313,5 +343,10 @@ def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, 
     if previous is not None and cfg.shield_hold_weight > 0:
         cost = cost + cfg.shield_hold_weight * np.sqrt((((cands - previous) / scale) ** 2).sum(-1))
     cost = cost + WALL_CONTACT_COST * touches_wall(None, walls, cfg.robot.radius_m, wall_m)
+    if cfg.shield_group_weight and group_ids is not None:
+        ids = np.asarray(group_ids)
+        grouped = np.isin(ids, ids[near])  # the groups with a member within reach, all their members
+        cost = cost + cfg.shield_group_weight * group_violations(
+            np.concatenate([xy0, xy]), all_futures[:, :, grouped], all_radii[grouped], ids[grouped], weights, cfg)
     best = int(np.argmin(cost))
     return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))

@@ -39,6 +39,9 @@ class ShieldedPolicy:
     def __init__(self, inner: Any, config: MPCConfig) -> None:
         if config.shield_horizon_s <= 0:
             raise ValueError("the shield needs MPCConfig.shield_horizon_s > 0 (0 turns it off)")
+        if config.shield_group_weight:  # the wrapped policy predicts no groups; ignoring the option would be silent
+            raise ValueError("shield_group_weight needs predicted groups: it applies to the MPC policies, not to "
+                             f"{inner.name}{SHIELD_SUFFIX}")
         self.inner, self.config = inner, config
         # the constant-velocity future needs the window's last two rows; more if the wrapped policy reads more
         reads = getattr(inner, "reads_history", True)

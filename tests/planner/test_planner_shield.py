@@ -257,3 +257,44 @@ def test_the_grid_roll_out_is_the_stepwise_roll_out_bit_for_bit(robot):
         varying = held + rng.normal(0.0, 0.5, held.shape) * (i % 2)
         stepped = np.stack([np.stack([s[:2] for s in _stepped(state, c, robot)]) for c in varying])
         assert rollout_candidates(state, varying, 0.1, robot).tobytes() == stepped.tobytes()
+
+
+def _walker_and_pair(group_ids) -> PedPrediction:
+    """A walker coming head-on at 1.2 m/s and two people standing 0.9 m apart ahead-left, with group_ids (3,)."""
+    starts = np.array([[3.0, 0.45], [1.4, 0.3], [1.4, 1.2]])
+    vels = np.array([[-1.2, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    t = 0.4 * np.arange(1, 13)
+    pos = starts[None, None] + t[None, :, None, None] * vels[None, None]
+    return PedPrediction(pos, np.full(3, 0.3), np.asarray(group_ids), np.ones(3, bool), current=starts, step_s=STEP_S)
+
+
+def _group_shortfall(state, command, pair: np.ndarray, cfg: MPCConfig) -> float:
+    """Smallest surface clearance (m) of the robot holding `command` for 1.6 s from the segment between the two
+    standing people at pair (2, 2), less their 0.3 m radius: the group's region as the env measures intrusion."""
+    xy = rollout_candidates(state, np.tile(command, (1, 16, 1)), 0.1, cfg.robot)[0]
+    a, ab = pair[0], pair[1] - pair[0]
+    t = np.clip(((xy - a) @ ab) / (ab @ ab), 0.0, 1.0)
+    return float((np.linalg.norm(xy - (a + t[:, None] * ab), axis=1) - 0.3 - cfg.robot.radius_m).min())
+
+
+def test_the_group_weight_passes_round_a_group_as_safely():
+    """Dodging the walker, the shield alone grazes the standing pair's region; told they are a group
+    (`shield_group_weight`), it picks a command as safe (no sample hit) that keeps the group margin."""
+    state, pair = np.array([0.0, 0.0, 0.0, 1.2, 0.0]), np.array([[1.4, 0.3], [1.4, 1.2]])
+    grouped = replace(SHIELD, shield_group_weight=1.0)
+    plain = shield_control(state, STRAIGHT, _walker_and_pair([0, 1, 1]), None, SHIELD)
+    aware = shield_control(state, STRAIGHT, _walker_and_pair([0, 1, 1]), None, grouped)
+    assert plain.replaced and aware.replaced and aware.chosen_risk == plain.chosen_risk == 0.0
+    assert _group_shortfall(state, plain.control, pair, SHIELD) < SHIELD.shield_group_margin_m
+    assert _group_shortfall(state, aware.control, pair, SHIELD) >= SHIELD.shield_group_margin_m
+    # strangers (singletons) are no group: the weight then changes nothing
+    strangers = shield_control(state, STRAIGHT, _walker_and_pair([0, 1, 2]), None, grouped)
+    assert np.array_equal(strangers.control, plain.control)
+
+
+def test_invalid_group_weight_raises():
+    for bad in (-0.5, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="shield_group_weight"):
+            MPCConfig(shield_group_weight=bad)
+    with pytest.raises(ValueError, match="shield_group_margin_m"):
+        MPCConfig(shield_group_margin_m=-0.1)
