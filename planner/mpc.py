@@ -101,6 +101,7 @@ class MPCPlanner:
         positions, see :class:`PedPrediction`; None = nobody) and obstacles (segments (S, 4) m, or a list
         of polygons (V, 2) m; None = none). Returns the first control and the plan (:class:`PlanResult`).
         Raises ValueError on malformed or non-finite input, before any solver work; never otherwise."""
+        called = time.perf_counter()
         state, goal, prediction, obstacles = check_inputs(robot_state, goal, prediction, obstacles,
                                                           self.dims.state_dim, self.config.dt_s)
         if self._plan is not None:
@@ -116,6 +117,7 @@ class MPCPlanner:
             result = self._fallback(state, "solver_error", f"{type(exc).__name__}: {exc}", 0.0, 0, np.inf)
         if self.config.shield_horizon_s > 0:
             result = self._shield(result, state, prediction, obstacles)
+        result = replace(result, plan_time_s=time.perf_counter() - called)
         self.stats.record(result)
         return result
 

@@ -49,9 +49,10 @@ class EpisodeRecord:
     or None (written as `collision_kind` before; such records still load, `RENAMED_FIELDS`).
     collision_time_s: time of the (first, episode-ending) collision. spawn_contacts: contacts of kind "spawn" that
     did not end the episode (`CrowdNavConfig.spawn_contact_ends_episode`). plans/fallbacks: planner calls and
-    fallbacks; solve_times_ms: every solver call's wall time. group_intrusion / intrusion_fraction: None where the
-    crowd had no group labels (`envs.crowd.Crowd.group_labels`). fingerprint: identifies the settings the episode
-    ran under (suite, cell, policy); records merge only when it agrees.
+    fallbacks; solve_times_ms: the wall time of every plan that ran the solver (`PlanResult.plan_time_s`, the whole
+    `plan()` call; records written before 2026-11-27 hold the solver call, route and shield only, 7-15 ms less).
+    group_intrusion / intrusion_fraction: None where the crowd had no group labels (`envs.crowd.Crowd.group_labels`).
+    fingerprint: identifies the settings the episode ran under (suite, cell, policy); records merge only when it agrees.
 
     The social-navigation metrics (`envs.social_metrics`; None in records written before they existed, in error
     records, and where a metric is undefined): time_<intimate|personal|social>_s / <zone>_fraction, time (s) and
