@@ -77,6 +77,7 @@ class MPCPlanner:
         self.stats = PlanStats()
         self._plan: _Plan | None = None
         self._shielded: np.ndarray | None = None  # the command the shield applied last step, if it replaced one
+        self._mapped: dict[int, tuple] = {}  # `_maps`
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
         lane = self.config.lane
         self.lanes = LaneKeeper(lane, self.config.wall_clearance_m) if lane is not None else None
@@ -201,15 +202,21 @@ class MPCPlanner:
             prev_states = self._plan.states.copy()
             prev_states[0] = state
             candidates.insert(0, (prev_states, self._plan.controls))
-        best, best_cost = None, np.inf
-        for cand_states, cand_controls in candidates:
-            w = np.zeros(layout.n)
-            w[layout.z], w[layout.u] = cand_states, cand_controls
-            w[layout.s] = self.ocp.slack_fn(w, p).full().reshape(layout.s.shape)
-            cost = float(self.ocp.cost_fn(w, p))
-            if cost < best_cost:
-                best, best_cost = w, cost
-        return best if best is not None else w
+        w = np.zeros((layout.n, len(candidates)))  # one column per candidate, all evaluated in one call each
+        for j, (cand_states, cand_controls) in enumerate(candidates):
+            w[layout.z, j], w[layout.u, j] = cand_states, cand_controls
+        slack_map, cost_map = self._maps(len(candidates))
+        w[layout.s.ravel()] = slack_map(w, p).full()
+        cost = cost_map(w, p).full().ravel()
+        finite = cost < np.inf  # NaN and inf never win; if none is finite, the last candidate
+        return w[:, int(np.argmin(np.where(finite, cost, np.inf))) if finite.any() else -1].copy()
+
+    def _maps(self, n: int) -> tuple:
+        """The NLP's slack and cost functions over n candidate columns (`casadi.Function.map`: the same operations
+        column by column, so the same floats as n single calls), built once per n."""
+        if n not in self._mapped:
+            self._mapped[n] = (self.ocp.slack_fn.map(n), self.ocp.cost_fn.map(n))
+        return self._mapped[n]
 
     def _goal_rollouts(self, state: np.ndarray, goal: np.ndarray, offsets_rad: np.ndarray):
         """States (C, H+1, nz) and controls (C, H, 2) of a bounded proportional controller heading to

@@ -62,9 +62,17 @@ class SceneArrays:
 
 
 def _ped_sample_distances(positions: np.ndarray) -> np.ndarray:
-    """positions (S, T, N, 2) -> (S, S, N) per-pedestrian mean Euclidean distance between samples."""
-    diff = positions[:, None] - positions[None, :]
-    return np.sqrt((diff * diff).sum(-1)).mean(axis=2)
+    """positions (S, T, N, 2) -> (S, S, N) per-pedestrian mean Euclidean distance between samples (symmetric, zero
+    diagonal: each pair is computed once)."""
+    s = positions.shape[0]
+    first, second = np.triu_indices(s, 1)
+    diff = positions[first] - positions[second]  # (P, T, N, 2)
+    dx, dy = diff[..., 0], diff[..., 1]
+    pair = np.sqrt(dx * dx + dy * dy).mean(axis=1)  # (P, N)
+    out = np.zeros((s, s, positions.shape[2]))
+    out[first, second] = pair
+    out[second, first] = pair
+    return out
 
 
 def _fps(dist: np.ndarray, k: int) -> np.ndarray:
@@ -186,12 +194,12 @@ def _nearest_walls(obstacles: np.ndarray | None, robot_xy: np.ndarray, w: int) -
 
 def _nearest_groups(group_ids: np.ndarray, mask: np.ndarray, dist: np.ndarray, g: int) -> list[np.ndarray]:
     """Member index arrays of the g groups with >= 2 real members nearest to the robot."""
-    groups = []
-    for gid in np.unique(group_ids[mask]):
-        members = np.flatnonzero((group_ids == gid) & mask)
-        if members.size >= 2:
-            groups.append((float(dist[members].min()), int(gid), members))
-    return [members for _, _, members in sorted(groups, key=lambda t: (t[0], t[1]))[:g]]
+    real = np.flatnonzero(mask)
+    ids, slot, counts = np.unique(group_ids[real], return_inverse=True, return_counts=True)
+    nearest = np.full(ids.size, np.inf)
+    np.minimum.at(nearest, slot, dist[real])
+    order = [i for i in np.lexsort((ids, nearest)) if counts[i] >= 2][:g]  # by distance, then id
+    return [real[slot == i] for i in order]
 
 
 def _group_arrays(stage_pos: np.ndarray, radii: np.ndarray, groups: list[np.ndarray], robot_xy: np.ndarray,

@@ -251,3 +251,31 @@ def test_plan_time_is_the_whole_call(goal, monkeypatch):
     assert result.status == "solved" and result.iterations > 0
     assert result.plan_time_s >= result.solve_time_s + 0.05
     assert planner.stats.solve_times_s == [result.plan_time_s]  # the stats (and the records) keep the whole call
+
+
+def test_initial_guess_is_the_cheapest_candidate_under_the_nlp_cost(goal):
+    """The candidates' slacks and costs are evaluated in one mapped call each; the guess is the candidate that
+    evaluating them one by one picks, bit for bit (with and without a previous plan among them)."""
+    from planner import mpc as mpc_module
+    from planner.ocp import pack_params
+    from planner.scene import build_scene
+
+    planner = MPCPlanner(make_config())
+    pred = frozen_prediction(np.array([[2.0, 0.2], [3.0, -0.6], [3.5, 1.0]]), group_ids=np.array([0, 1, 1]), **PRED)
+    state = np.array([0.0, 0.0, 0.3, 0.6, 0.1])
+    for _ in range(2):  # the second time with the first plan's shifted copy as one more candidate
+        ocp, layout = planner.ocp, planner.ocp.layout
+        p = pack_params(ocp.sizes, state, goal, build_scene(state, pred, None, planner.config, goal))
+        states, controls = planner._goal_rollouts(state, goal, np.array(mpc_module.HEADING_OFFSETS_RAD))
+        cands = list(zip(states, controls, strict=True))
+        if planner._plan is not None:
+            cands.insert(0, (np.vstack([state, planner._plan.states[1:]]), planner._plan.controls))
+        best, best_cost = None, np.inf
+        for cand_states, cand_controls in cands:
+            w = np.zeros(layout.n)
+            w[layout.z], w[layout.u] = cand_states, cand_controls
+            w[layout.s] = ocp.slack_fn(w, p).full().reshape(layout.s.shape)
+            if float(ocp.cost_fn(w, p)) < best_cost:
+                best, best_cost = w, float(ocp.cost_fn(w, p))
+        assert np.array_equal(planner._initial_guess(state, goal, p), best)
+        planner.plan(state, goal, pred)

@@ -113,3 +113,23 @@ def test_group_spread_wider_than_max_span_is_not_a_region():
     apart = frozen_prediction(np.array([[4.0, 2.5], [4.0, -2.5]]), group_ids=np.array([0, 0]), **PRED)
     assert np.all(build_scene(np.zeros(2), close, None, cfg).grp_clear > 0)
     assert np.all(build_scene(np.zeros(2), apart, None, cfg).grp_clear < -100)
+
+
+def test_sample_distances_and_nearest_groups_match_their_plain_definitions():
+    """The scene's two per-plan helpers, written for speed (each sample pair once; groups ranked without a loop),
+    give exactly the floats and groups of their plain definitions: the MPC's plans did not change."""
+    from planner.scene import _nearest_groups, _ped_sample_distances
+
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        s, n = int(rng.integers(1, 21)), int(rng.integers(1, 15))
+        pos = rng.normal(scale=3.0, size=(s, 12, n, 2))
+        diff = pos[:, None] - pos[None, :]
+        assert np.array_equal(_ped_sample_distances(pos), np.sqrt((diff * diff).sum(-1)).mean(axis=2))
+        ids = rng.integers(0, max(1, n // 2), n)
+        mask = rng.random(n) < 0.8
+        dist = np.round(rng.uniform(0, 5, n), 1)  # rounded: ties between groups, broken by id
+        plain = sorted(((float(dist[(ids == g) & mask].min()), int(g), np.flatnonzero((ids == g) & mask))
+                        for g in np.unique(ids[mask]) if ((ids == g) & mask).sum() >= 2), key=lambda t: t[:2])
+        fast = _nearest_groups(ids, mask, dist, 3)
+        assert [m.tolist() for m in fast] == [m.tolist() for _, _, m in plain[:3]]
