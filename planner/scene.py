@@ -152,8 +152,9 @@ def segment_projection(p: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.n
     t (..., W) the clipped position of the closest point along each segment (0 at its start, 1 at its end) and
     ab (W, 2) m the segments' vectors: the closest points are start + t ab. The project's one point-to-segment
     computation (the env's wall checks use it too); crowdsim keeps a twin (crowdsim.forces, it may not import the
-    planner), checked against this one in tests/test_shared_facts.py."""
-    a, b = seg[:, :2], seg[:, 2:]
+    planner), checked against this one in tests/test_shared_facts.py. seg may carry leading axes (..., W, 4) that
+    broadcast against p's (the shield's moving group capsules: one segment per sample and time)."""
+    a, b = seg[..., :2], seg[..., 2:]
     ab = b - a
     rel = np.asarray(p, float)[..., None, :] - a
     t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)

@@ -46,7 +46,7 @@ import numpy as np
 from planner.config import MPCConfig, RobotConfig
 from planner.dynamics import _clip1, _clip_one, clip_control, step_numpy
 from planner.prediction import PedPrediction, current_positions
-from planner.scene import group_capsules, resample_in_time, wall_clearance
+from planner.scene import group_capsules, point_segment_distances, resample_in_time, wall_clearance
 
 N_SPEEDS = 5  # candidate forward speeds (unicycle) / speed magnitudes (holonomic), rest excluded
 N_TURNS = 9  # candidate yaw rates (unicycle) / directions (holonomic: 2 * N_TURNS)
@@ -275,11 +275,9 @@ def group_violations(xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, gro
         if len(members) < 2:
             continue
         a, b, rad = group_capsules(futures[:, :, members], radii[members])  # (K, T, 2), (K, T, 2), (K, T)
-        ab = b - a
-        rel = xy[:, None] - a  # (C, K, T, 2)
-        t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-        gap = np.linalg.norm(rel - t[..., None] * ab, axis=-1) - rad - cfg.robot.radius_m  # (C, K, T)
-        short = np.where(np.linalg.norm(ab, axis=-1) > cfg.max_group_span_m, 0.0,
+        seg = np.concatenate([a, b], axis=-1)[:, :, None]  # (K, T, 1, 4): one segment per sample and time
+        gap = point_segment_distances(xy[:, None], seg)[..., 0] - rad - cfg.robot.radius_m  # (C, K, T)
+        short = np.where(np.linalg.norm(b - a, axis=-1) > cfg.max_group_span_m, 0.0,
                          np.maximum(cfg.shield_group_margin_m - gap, 0.0))
         total += (short * weights).sum(-1).mean(-1)
     return total
