@@ -29,7 +29,7 @@ from envs.config import CrowdNavConfig
 from envs.crowd_models import make_crowd
 from envs.frame import SceneFrame
 from envs.geometry import WallIndex
-from envs.history import PedHistory
+from envs.history import TRACK_ROWS, PedHistory
 from envs.kernels import intruded_groups, step_distances
 from envs.metrics import EpisodeMetrics, social_step
 from envs.observation import build_observation, observation_space
@@ -64,6 +64,7 @@ class CrowdNavEnv(gym.Env):
         self.observation_space = observation_space(self.config)
         self.timing = DEFAULT_TIMING
         self.history = PedHistory(self.timing.obs_len)
+        self.track_history = PedHistory(TRACK_ROWS)  # the group rules' longer past (`track_window`)
         self._step_start: tuple[np.ndarray, CrowdState] | None = None
         self._nearest_row = -1
         self._spawns = SpawnContacts(self.config.discomfort_distance_m)
@@ -90,6 +91,7 @@ class CrowdNavEnv(gym.Env):
         self._pred_rng = np.random.default_rng(int(self.np_random.integers(2**31 - 1)))
         self.crowd.clear_robot()
         self.history.clear()
+        self.track_history.clear()
         self.steps = self._sim_steps = 0
         self._state = state
         self._observe_arrivals()
@@ -209,10 +211,11 @@ class CrowdNavEnv(gym.Env):
             self._peds_cache = (self._state, peds)
         return peds
 
-    def view(self, history: bool | int = True, future: bool = False) -> PolicyView:
+    def view(self, history: bool | int = True, future: bool = False, track: bool = False) -> PolicyView:
         """What a policy reads now (`envs.view.PolicyView`): the last observation and the typed scene, copies; the
         history window only when asked for (True; an int k: its newest k rows only, as `history_window`); the
-        pedestrians' true future only when asked for (reference policies)."""
+        pedestrians' true future only when asked for (reference policies); their track (`track_window`) only when
+        asked for (policies whose predictor groups by a rule)."""
         if not self._obs:
             raise RuntimeError("view() before reset()")
         p = self._sensed(self.pedestrians())
@@ -224,7 +227,8 @@ class CrowdNavEnv(gym.Env):
             ahead = self.crowd.future(p.ped_id, t.step_s * np.arange(1, t.pred_len + 1))
         return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),
                           self.config.robot, p, self._history_rows(p, history),
-                          np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s, ahead)
+                          np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s, ahead,
+                          self.track_window(p) if track else None)
 
     def action_for(self, decision: Decision) -> np.ndarray:
         """The action (2,) float32 a policy's decision asks for: its action, or the action of its control."""
@@ -247,6 +251,14 @@ class CrowdNavEnv(gym.Env):
         p = self.pedestrians() if p is None else p
         tick = self.config.ticks_per_prediction_step
         return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s, rows)
+
+    def track_window(self, p: Pedestrians | None = None) -> np.ndarray:
+        """(TRACK_ROWS = 48, N, 2) m: the same pedestrians' longer past for a group rule (`predictor.api`'s `track`),
+        0.4 s apart, the last row now: its newest obs_len rows are `history_window`'s, the older ones their recorded
+        positions, NaN before each pedestrian was first seen (`envs.history.PedHistory.track_now`)."""
+        p = self.pedestrians() if p is None else p
+        tick = self.config.ticks_per_prediction_step
+        return self.track_history.track_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.history_window(p))
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped
@@ -300,6 +312,7 @@ class CrowdNavEnv(gym.Env):
     def _record_tick(self) -> None:
         p = self._peds()
         self.history.record(p.ped_id, p.pos)
+        self.track_history.record(p.ped_id, p.pos)
 
     def _goal_distance(self) -> float:
         d = self.goal - self.robot_state[:2]
@@ -329,8 +342,9 @@ class CrowdNavEnv(gym.Env):
         if self._predictor is None:  # torch is loaded only when predictions are observed
             self._predictor = load_predictor_spec(self.config.observation.predictor, threads=None, timing=self.timing)
         k = self.config.observation.n_prediction_samples
+        track = self.track_window() if getattr(self._predictor, "reads_track", False) else None
         self._pred_samples, self._pred_groups = predict(self._predictor, self.history_window(), k, self._pred_rng,
-                                                        self.timing.pred_len)
+                                                        self.timing.pred_len, track)
 
     def _sensed(self, p: Pedestrians) -> Pedestrians:
         """The rows of `p` within the sensor's surface gap (`ObservationConfig.sensor_gap_m`; all when it is inf)."""

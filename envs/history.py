@@ -16,6 +16,8 @@ import numpy as np
 from envs.timing import DEFAULT_TIMING
 
 EARLY_WINDOW_S = 0.4  # a pedestrian's velocity is measured over its first this-many seconds in view, s
+TRACK_ROWS = 48  # snapshots kept for the group rules' track (19.2 s at 0.4 s; chosen on the UCY validation, RESULTS.md
+# "sim-to-real"): the predictor's window is the newest obs_len of them
 
 
 @dataclass
@@ -100,6 +102,28 @@ class PedHistory:
         observation (its first snapshot, or now if it came after the newest one) are extrapolated back at its
         early velocity (`extrapolate_back`). `rows` (1 .. length): only the newest rows, (rows, n, 2), the whole
         window's last rows exactly, from the newest snapshots only (cheaper)."""
+        return self._window_now(ped_id, pos, frac, step_s, rows)[0]
+
+    def track_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, window: np.ndarray) -> np.ndarray:
+        """(length, n, 2) m: what a group rule reads (`predictor.api`'s `track`). Its newest rows are `window`
+        (w, n, 2), the predictor's history window now (`window_now` of the env's obs_len history, extrapolated back
+        where need be); the older rows are this history's snapshots on the same grid (interpolated off the tick as
+        `window_now` does), NaN before each pedestrian's first kept snapshot (and where none is kept yet)."""
+        w = len(window)
+        if not 1 <= w <= self.length or window.shape[1:] != (len(ped_id), 2):
+            raise ValueError(f"window must be (1..{self.length}, {len(ped_id)}, 2), got {window.shape}")
+        snaps, first = self._window(ped_id, None if frac == 0.0 else pos)
+        out = snaps
+        if frac > 0.0:
+            out = np.empty_like(snaps)
+            out[:-1] = (1.0 - frac) * snaps[:-1] + frac * snaps[1:]
+        out[np.arange(len(out))[:, None] < first[None]] = np.nan  # before its first snapshot (or only seen now)
+        out[-w:] = window
+        return out
+
+    def _window_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, step_s: float,
+                    rows: int | None) -> tuple[np.ndarray, np.ndarray]:
+        """`window_now` and `_window`'s (n,) first rows."""
         snaps, first = self._window(ped_id, None if frac == 0.0 else pos, rows)
         out = snaps
         if frac > 0.0:
@@ -108,11 +132,11 @@ class PedHistory:
             out[-1] = pos
         seen = first < len(out)  # in a snapshot (else only now: the current position stands in)
         if seen.all() and not first.any():
-            return out  # everyone seen for the whole window
+            return out, first  # everyone seen for the whole window
         anchor_row = np.where(seen, first, len(out) - 1)
         anchor_pos = np.where(seen[:, None], snaps[np.minimum(first, len(out) - 1), np.arange(len(first))], pos)
         lag = np.where(seen, frac * step_s, 0.0)
-        return extrapolate_back(out, anchor_row, anchor_pos, lag, self.early_velocity(ped_id), step_s)
+        return extrapolate_back(out, anchor_row, anchor_pos, lag, self.early_velocity(ped_id), step_s), first
 
     def window(self, ped_id: np.ndarray, current: np.ndarray | None = None) -> np.ndarray:
         """(length, n, 2) m history of pedestrians ped_id (n,), oldest first; the last row is the newest

@@ -34,10 +34,17 @@ def load_predictor_spec(spec: str | None, threads: int | None = 1, timing: Predi
 
 
 def predict(predictor: Any, history: np.ndarray, n_samples: int, rng: np.random.Generator,
-            pred_len: int) -> tuple[np.ndarray, np.ndarray]:
+            pred_len: int, track: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Samples (K, pred_len, N, 2) m and group ids (N,) for a history (obs_len, N, 2) m; with nobody in view,
-    (1, pred_len, 0, 2) and (0,) without calling the predictor (and without drawing from `rng`)."""
+    (1, pred_len, 0, 2) and (0,) without calling the predictor (and without drawing from `rng`). `track` (H, N, 2)
+    m (`CrowdNavEnv.track_window`) goes to a predictor that declares `reads_track` (its group rule reads it); one
+    that does not must not be given one (ValueError)."""
     if history.shape[1] == 0:
         return np.zeros((1, pred_len, 0, 2)), np.zeros(0, np.int64)
-    pred = predictor.predict(history, n_samples=n_samples, rng=rng)
+    if track is None:
+        pred = predictor.predict(history, n_samples=n_samples, rng=rng)
+    elif getattr(predictor, "reads_track", False):
+        pred = predictor.predict(history, n_samples=n_samples, rng=rng, track=track)
+    else:
+        raise ValueError(f"{type(predictor).__name__} reads no track (no reads_track); give it the history only")
     return pred.samples, pred.group_id

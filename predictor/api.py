@@ -16,7 +16,7 @@ from predictor.checkpoint import load_model
 from predictor.device import model_device
 from predictor.ethucy import OBS_LEN, PRED_LEN, STEP_S  # the ETH/UCY protocol (one definition)
 from predictor.gaussian import mean_cov
-from predictor.group_rules import get_rule, split_group_rule
+from predictor.group_rules import check_obs, get_rule, split_group_rule
 from predictor.model import GPGraph, check_group_mode, check_group_threshold_scale
 from predictor.sampling import LatentSpec, cholesky_2x2, draw_latents, sample_positions
 
@@ -55,6 +55,25 @@ def check_history(history: np.ndarray) -> np.ndarray:
     return h
 
 
+def check_track(track: np.ndarray | None, history: np.ndarray, reads_track: bool) -> np.ndarray | None:
+    """Validate a longer track (H >= 8, N, 2) m for the group rule: the same N pedestrians as ``history`` (8, N, 2),
+    rows 0.4 s apart, its last row equal to the history's; NaN only as a pedestrian's rows before it was first seen
+    (``predictor.group_rules``). None passes through; a track for a predictor that reads none is an error."""
+    if track is None:
+        return None
+    if not reads_track:
+        raise ValueError("this predictor reads no track (its grouping reads the 8 history steps); give it none, or "
+                         "group by a rule that reads one (e.g. NAME+coherent-motion-track)")
+    tr = np.asarray(track, dtype=np.float64)
+    if tr.ndim != 3 or tr.shape[0] < history.shape[0] or tr.shape[1:] != history.shape[1:]:
+        raise ValueError(f"track must have shape (H >= {history.shape[0]}, {history.shape[1]}, 2) in metres like the "
+                         f"history, got {tr.shape}")
+    if not np.array_equal(tr[-1], history[-1]):
+        raise ValueError("track's last row must equal the history's (the same pedestrians, now)")
+    check_obs(tr)  # NaN only before a pedestrian was first seen, no inf
+    return tr
+
+
 def _check_inputs(history: np.ndarray, n_samples: int,
                   rng: np.random.Generator | int | None) -> tuple[np.ndarray, np.random.Generator]:
     """The checked (8, N, 2) history and the Generator to draw from: `rng` itself, a new one seeded with an
@@ -80,16 +99,34 @@ class GPGraphPredictor:
         self.model = model.eval()
         self.spec = spec or LatentSpec("normal", model.config.sample_level, per_step=True)
 
+    @property
+    def track_steps(self) -> int:
+        """Positions per pedestrian its grouping reads: its group rule's ``track_steps``, else the 8 of ``history``."""
+        uses_rule = self.model.group_rule is not None and self.model.config.uses_groups
+        return get_rule(self.model.group_rule).track_steps if uses_rule else OBS_LEN
+
+    @property
+    def reads_track(self) -> bool:
+        """Whether it reads ``predict``'s ``track``: its group rule reads more than the 8 steps of ``history``."""
+        return self.track_steps > OBS_LEN
+
     @torch.no_grad()
     def predict(
-        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | int | None = None
+        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | int | None = None,
+        track: np.ndarray | None = None,
     ) -> Prediction:
-        """Sample ``n_samples`` futures from ``history`` (8, N, 2), m. Same rng state, same samples."""
+        """Sample ``n_samples`` futures from ``history`` (8, N, 2), m. Same rng state, same samples.
+
+        ``track`` (H >= 8, N, 2) m, only for a predictor that ``reads_track``: the same pedestrians' longer past
+        (``check_track``), which its group rule reads (its newest ``track_steps`` rows) instead of the 8 steps; the
+        forecast itself reads ``history`` only. Without one such a rule reads ``history``."""
         h, rng = _check_inputs(history, n_samples, rng)
+        tr = check_track(track, h, self.reads_track)
+        rule_obs = None if tr is None else tr[None]
         device = model_device(self.model)  # the model's forward runs there; sampling stays on the CPU
         obs_abs = torch.as_tensor(h, dtype=torch.float32, device=device)[None]
         obs_rel = torch.as_tensor(relative(h), dtype=torch.float32, device=device)[None]
-        out = self.model(obs_abs, obs_rel, torch.ones(1, h.shape[1], dtype=torch.bool, device=device))
+        out = self.model(obs_abs, obs_rel, torch.ones(1, h.shape[1], dtype=torch.bool, device=device), rule_obs)
         mu, cov = (a[0].double().numpy() for a in mean_cov(out.raw.cpu()))
         groups = out.groups[0].cpu().numpy().astype(np.int64)
         z = draw_latents(self.spec, n_samples, PRED_LEN, groups, rng)
@@ -133,10 +170,23 @@ class ConstantVelocityPredictor:
         self.config = config or ConstantVelocityConfig()
         self.group_rule = get_rule(group_rule) if group_rule is not None else None
 
+    @property
+    def track_steps(self) -> int:
+        """Positions per pedestrian its grouping reads (as ``GPGraphPredictor.track_steps``)."""
+        return self.group_rule.track_steps if self.group_rule is not None else OBS_LEN
+
+    @property
+    def reads_track(self) -> bool:
+        """Whether it reads ``predict``'s ``track`` (as ``GPGraphPredictor.reads_track``)."""
+        return self.track_steps > OBS_LEN
+
     def predict(
-        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | int | None = None
+        self, history: np.ndarray, n_samples: int = 20, rng: np.random.Generator | int | None = None,
+        track: np.ndarray | None = None,
     ) -> Prediction:
+        """As ``GPGraphPredictor.predict``: ``track`` is what the group rule reads (when there is one)."""
         h, rng = _check_inputs(history, n_samples, rng)
+        tr = check_track(track, h, self.reads_track)
         k = self.config.velocity_steps
         vel = (h[-1] - h[-1 - k]) / k  # (N, 2), m/step
         steps = np.arange(1, PRED_LEN + 1, dtype=np.float64)[:, None, None]
@@ -147,7 +197,7 @@ class ConstantVelocityPredictor:
         var = (steps[:, :, 0] * sigma) ** 2  # (12, 1)
         cov = np.zeros((PRED_LEN, h.shape[1], 2, 2))
         cov[..., 0, 0] = cov[..., 1, 1] = var
-        groups = self.group_rule(h) if self.group_rule is not None else np.arange(h.shape[1])
+        groups = self.group_rule(h if tr is None else tr) if self.group_rule is not None else np.arange(h.shape[1])
         return Prediction(samples, mean, cov, groups)
 
 

@@ -34,10 +34,10 @@ import torch
 from predictor.checkpoint import CheckpointError, load_model
 from predictor.data import DataFormatError, check_data_step
 from predictor.device import DEVICES, resolve_device
-from predictor.ethucy import DEFAULT_DATA_DIR, GROUP_OVERLAPS
+from predictor.ethucy import DEFAULT_DATA_DIR, GROUP_OVERLAPS, OBS_LEN
 from predictor.evaluate import EvalConfig, evaluate
 from predictor.files import write_atomic
-from predictor.group_rules import GROUP_RULES
+from predictor.group_rules import GROUP_RULES, get_rule
 from predictor.group_validation import ABSENT_IDS
 from predictor.grouping import THRESHOLD_MODES
 from predictor.model import ASSIGNERS, GPGraph, GPGraphConfig, check_group_threshold_scale
@@ -100,12 +100,21 @@ def format_table(result: dict) -> str:
     return f"protocol={result['protocol']} seed={result['seed']} trials={result['trials']}\n{head}\n{row}"
 
 
+def _check_window_rule(model: Any) -> None:
+    """evaluate and predict have 8 observed steps per pedestrian: a group rule that reads a longer track would
+    silently read less than it is for."""
+    if model.group_rule is not None and (steps := get_rule(model.group_rule).track_steps) > OBS_LEN:
+        raise ValueError(f"group rule {model.group_rule} reads {steps} positions per pedestrian, and this command has "
+                         f"the {OBS_LEN} observed steps only (gpgraph groups and the env give rules their tracks)")
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.json:
         _check_output_file(args.json, ".json")
     model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping,
                           group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode,
                           group_rule=args.group_rule)
+    _check_window_rule(model)
     windows = _windows(args.data, args.split)
     cfg = EvalConfig(protocol=args.protocol, seed=args.seed, trials=args.trials, n_samples=args.samples,
                      pool_size=args.pool_size)
@@ -132,6 +141,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     model, _ = load_model(args.checkpoint, backbone=args.backbone, grouping=args.grouping,
                           group_threshold_scale=args.group_threshold_scale, group_mode=args.group_mode,
                           group_rule=args.group_rule)
+    _check_window_rule(model)
     model = model.to(args.device)
     if args.sample_level:
         model.config = replace(model.config, sample_level=args.sample_level)
@@ -162,6 +172,7 @@ def cmd_groups(args: argparse.Namespace) -> int:
     """PW / G-MITRE of each --predictor's groups on every window of the annotated recordings (validation)."""
     from predictor.api import load_predictor
     from predictor.group_validation import read_annotations, validate
+    from predictor.windows import window_tracks
 
     if args.json:
         _check_output_file(args.json, ".json")
@@ -175,7 +186,12 @@ def cmd_groups(args: argparse.Namespace) -> int:
 
     def groups_by(spec: str, rec: Any) -> Any:
         predictor = load(spec.replace("{scene}", rec.scene))
-        return lambda w: predictor.predict(w.obs, n_samples=1, rng=0).group_id
+        if not predictor.reads_track:
+            return lambda w: predictor.predict(w.obs, n_samples=1, rng=0).group_id
+        # a rule that reads a longer past gets each window's from the recording (NaN before a person was first seen)
+        tracks = {id(w): t for w, t in zip(rec.windows, window_tracks(rec.rows, rec.windows, predictor.track_steps),
+                                            strict=True)}
+        return lambda w: predictor.predict(w.obs, n_samples=1, rng=0, track=tracks[id(w)]).group_id
 
     for spec in args.predictor:
         load(spec.replace("{scene}", recordings[0].scene))  # a bad name fails before any scoring or note

@@ -36,6 +36,7 @@ class LabelledRecording:
     scene: str
     windows: list[Window]
     notes: tuple[str, ...] = field(default_factory=tuple)
+    rows: np.ndarray | None = None  # the recording's (frame, ped, x, y) rows, for ``window_tracks``
 
 
 def find_recording(data: Path, name: str) -> Path:
@@ -76,7 +77,7 @@ def read_labelled(data: Path, group_file: Path, overlaps: str = "error",
     windows = recording_windows(Recording(path=path, rows=rows, groups=groups))
     if not windows:
         raise DataFormatError(f"{path}: no window of 20 consecutive frames with 2 or more people present")
-    return LabelledRecording(name, path.parent.parent.name, windows, tuple(notes))
+    return LabelledRecording(name, path.parent.parent.name, windows, tuple(notes), rows)
 
 
 def read_annotations(data: Path, groups_dir: Path, overlaps: str = "error",

@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, fields
 from functools import partial
 from typing import NamedTuple
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -236,9 +237,12 @@ class GPGraph(nn.Module):
         """The grouping the hard assignment uses: ``group_mode``, else ``config.grouping``."""
         return self.config.grouping if self._group_mode is None else self._group_mode
 
-    def assign(self, obs_abs: Tensor, node_mask: Tensor) -> tuple[Tensor, Tensor]:
+    def assign(self, obs_abs: Tensor, node_mask: Tensor, rule_obs: np.ndarray | None = None) -> tuple[Tensor, Tensor]:
         """Pair distances D (B, N, N) and group labels (B, N) (``group_rule``, else ``effective_group_mode`` at
-        pi * scale)."""
+        pi * scale). ``rule_obs`` (B, H, N, 2) m: what the group rule reads instead of ``obs_abs`` (a longer
+        track, NaN before a pedestrian was first seen); only with a ``group_rule``."""
+        if rule_obs is not None and (self._group_rule is None or not self.config.uses_groups):
+            raise ValueError("rule_obs is read by a group rule only; this model has none (group_rule=None)")
         dist = self.assigner(obs_abs)
         pi = self.assigner.threshold
         mode = self.effective_group_mode
@@ -247,8 +251,8 @@ class GPGraph(nn.Module):
                 labels = torch.arange(dist.shape[1], device=dist.device).expand(dist.shape[0], -1).clone()
             elif self._group_rule is not None:
                 rule = get_rule(self._group_rule)
-                labels = torch.from_numpy(apply_rule(rule, obs_abs.detach().double().cpu().numpy(),
-                                                     node_mask.detach().cpu().numpy())).to(dist.device)
+                seen = obs_abs.detach().double().cpu().numpy() if rule_obs is None else rule_obs
+                labels = torch.from_numpy(apply_rule(rule, seen, node_mask.detach().cpu().numpy())).to(dist.device)
             elif mode == "ratio":
                 labels = grouping.ratio_groups(dist, node_mask, self.config.group_ratio)
             else:
@@ -296,11 +300,13 @@ class GPGraph(nn.Module):
         outs = run(torch.cat(feats), torch.cat(masks), variants)
         return [o[:, :, : f.shape[2]] for o, (f, _, _) in zip(outs, items, strict=True)]
 
-    def forward(self, obs_abs: Tensor, obs_rel: Tensor, node_mask: Tensor) -> Output:
-        """obs_abs, obs_rel: (B, 8, N, 2) positions (m) and displacements (m/step); node_mask (B, N)."""
+    def forward(self, obs_abs: Tensor, obs_rel: Tensor, node_mask: Tensor,
+                rule_obs: np.ndarray | None = None) -> Output:
+        """obs_abs, obs_rel: (B, 8, N, 2) positions (m) and displacements (m/step); node_mask (B, N); rule_obs: see
+        ``assign``."""
         cfg = self.config
         x = self.backbones[0].features(obs_rel)
-        dist, labels = self.assign(obs_abs, node_mask)
+        dist, labels = self.assign(obs_abs, node_mask, rule_obs)
         pi = self.assigner.threshold
         xg = grouping.straight_through(x, grouping.soft_assignment(dist, pi, cfg.tau, node_mask))
         items = self._branches(x, xg, labels, node_mask)

@@ -145,3 +145,26 @@ def augment_rotations(windows: list[Window], rng: np.random.Generator) -> list[W
 def has_labels(windows: list[Window]) -> bool:
     """Whether every window carries ground-truth group labels."""
     return bool(windows) and all(w.group_id is not None for w in windows)
+
+
+def window_tracks(rows: np.ndarray, windows: list[Window], steps: int) -> list[np.ndarray]:
+    """Each window's pedestrians' longer past: (steps, N, 2) m per window of ``recording_windows(rows)``, the
+    recording's frames up to the window's last observed one (its 8 observed rows are the last 8), NaN before the
+    run of consecutive frames in which a pedestrian is present up to the window (and before the recording starts).
+    This is what a group rule may read instead of the 8 steps (``predictor.api``'s ``track``)."""
+    if steps < OBS_LEN:
+        raise ValueError(f"steps must be >= {OBS_LEN} (the observed window), got {steps}")
+    frames, peds, present, pos = _presence(rows)
+    out = []
+    for w in windows:
+        end = int(np.searchsorted(frames, w.start_frame)) + OBS_LEN  # one past the last observed frame
+        cols = np.searchsorted(peds, w.ped_ids)
+        track = np.full((steps, len(cols), 2), np.nan)
+        lo = max(0, end - steps)
+        seen = present[lo:end, cols]  # (rows, N)
+        # a row counts only if the pedestrian is present there and in every later row up to the window
+        run = np.flip(np.cumprod(np.flip(seen, axis=0), axis=0), axis=0).astype(bool)
+        block = np.where(run[..., None], pos[lo:end, cols], np.nan)
+        track[steps - (end - lo):] = block
+        out.append(track)
+    return out

@@ -1,6 +1,7 @@
 """Choose the settings of the group rules on the UCY group annotations (validation), with a leave-one-file-out check.
 
     python scripts/group_rule_selection.py --groups ../shared/datasets/eth_ucy_groups --json out/simreal/rules.json
+    python scripts/group_rule_selection.py --groups ../shared/datasets/eth_ucy_groups --track-steps 8,12,20,32,48,80
 
 Scores every setting of a small grid (predictor.group_rules: CoherentMotionRule over distance_m x rel_speed_mps x
 linkage, ProximityRule over radius_m x steps) on every window of each annotated recording (``gpgraph groups``'
@@ -9,6 +10,10 @@ windows, students003's overlapping lines merged and its two absent ids dropped, 
 - the choice: the setting with the highest mean PW F1 over the recordings (ties: mean G-MITRE F1), per family;
 - leave-one-file-out: for each recording, the setting chosen on the other two, scored on it. This is the honest
   estimate of how a chosen rule does on people it was not chosen on; the choice's own scores are optimistic.
+
+``--track-steps``: the rules read each pedestrian's last H positions up to the window's last observed one
+(``predictor.windows.window_tracks``, NaN before it was first seen) instead of the 8 observed steps; one table per H
+(how ``coherent-motion-track``'s 48 was chosen).
 
 The annotations are for validation only: nothing is trained on them. The BIWI scenes (eth, hotel) are never read.
 """
@@ -25,20 +30,23 @@ import numpy as np
 
 from predictor.ethucy import DEFAULT_DATA_DIR
 from predictor.group_rules import CoherentMotionRule, GroupRule, ProximityRule
-from predictor.group_validation import read_annotations, score_windows, summary
+from predictor.group_validation import read_annotations, summary
+from predictor.metrics import GroupScores
+from predictor.windows import window_tracks
 
 DISTANCES_M = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0)
 REL_SPEEDS_MPS = (0.3, 0.5, 0.8, 1.2)
 RADII_M = (0.75, 1.0, 1.25, 1.5, 2.0)
 
 
-def grid() -> dict[str, GroupRule]:
-    """Every candidate, keyed by a readable name."""
+def grid(track_steps: int = 8) -> dict[str, GroupRule]:
+    """Every candidate reading ``track_steps`` positions per pedestrian, keyed by a readable name."""
     rules: dict[str, GroupRule] = {}
     for link, d, v in itertools.product(("average", "single"), DISTANCES_M, REL_SPEEDS_MPS):
-        rules[f"coherent-{link}-{d}m-{v}mps"] = CoherentMotionRule(distance_m=d, rel_speed_mps=v, linkage=link)
+        rules[f"coherent-{link}-{d}m-{v}mps"] = CoherentMotionRule(distance_m=d, rel_speed_mps=v, linkage=link,
+                                                                   track_steps=track_steps)
     for steps, r in itertools.product(("last", "max", "mean"), RADII_M):
-        rules[f"proximity-{steps}-{r}m"] = ProximityRule(radius_m=r, steps=steps)
+        rules[f"proximity-{steps}-{r}m"] = ProximityRule(radius_m=r, steps=steps, track_steps=track_steps)
     return rules
 
 
@@ -56,16 +64,35 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("--data", type=Path, default=DEFAULT_DATA_DIR)
     p.add_argument("--groups", type=Path, required=True, help="folder of X.groups.txt (UCY annotations)")
+    p.add_argument("--track-steps", default="8", metavar="H[,H...]",
+                   help="positions the rules read per pedestrian (8: the window's observed steps)")
     p.add_argument("--json", type=Path, default=None)
     args = p.parse_args(argv)
     try:
+        steps = [int(h) for h in args.track_steps.split(",")]
+        if min(steps) < 8:
+            raise ValueError(f"--track-steps must be >= 8, got {args.track_steps}")
         recordings = read_annotations(args.data, args.groups, overlaps="merge", absent_ids="drop")
     except (FileNotFoundError, ValueError) as exc:
         print(f"group_rule_selection: error: {exc}", file=sys.stderr)
         return 2
+    out = {}
+    for h in steps:
+        print(f"track steps {h}" + (" (the window's observed steps)" if h == 8 else ""))
+        out[h] = select(recordings, h)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(out if len(steps) > 1 else out[steps[0]], indent=1) + "\n")
+    return 0
+
+
+def select(recordings: list, track_steps: int) -> dict:
+    """Score the grid on ``track_steps`` positions per pedestrian (8: each window's observed steps exactly); print
+    the choice and the leave-one-file-out scores per family."""
     files = [r.name for r in recordings]
-    scores = {name: {r.name: summary(score_windows(r.windows, lambda w, rule=rule: rule(w.obs)))
-                     for r in recordings} for name, rule in grid().items()}
+    seen = {r.name: window_tracks(r.rows, r.windows, track_steps) for r in recordings}
+    scores = {name: {r.name: summary(score_windows_of(r.windows, seen[r.name], rule)) for r in recordings}
+              for name, rule in grid(track_steps).items()}
     out: dict = {"files": files, "scores": scores, "chosen": {}, "leave_one_file_out": {}}
     print(f"{'family':<20} {'chosen on all three':<34} " + " ".join(f"{f:>14}" for f in files) + "   mean PW/G-MITRE")
     for fam in sorted({family(n) for n in scores}):
@@ -80,10 +107,15 @@ def main(argv: list[str] | None = None) -> int:
         cells = " ".join(f"{s['pw_f1']:>6.3f}/{s['gmitre_f1']:.3f}" for _, s in lofo.values())
         mean = (np.mean([s["pw_f1"] for _, s in lofo.values()]), np.mean([s["gmitre_f1"] for _, s in lofo.values()]))
         print(f"{'':<20} {'leave-one-file-out':<34} {cells}   {mean[0]:.3f}/{mean[1]:.3f}")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(out, indent=1) + "\n")
-    return 0
+    return out
+
+
+def score_windows_of(windows: list, tracks: list[np.ndarray], rule: GroupRule) -> GroupScores:
+    """The rule's groups on each window's track against the window's annotation."""
+    scores = GroupScores()
+    for w, track in zip(windows, tracks, strict=True):
+        scores.add(w.group_id, rule(track))
+    return scores
 
 
 if __name__ == "__main__":

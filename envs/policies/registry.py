@@ -145,7 +145,8 @@ def _json_safe(obj: Any) -> Any:
 class Policy(Protocol):
     """What the episode loop needs of a policy. Optional: `stats` (a `planner.PlanStats`), and `reads_history`
     (False: the policy reads no `view.history`, which is then None and not computed; an int k: only the window's
-    newest k rows; default True, the whole window)."""
+    newest k rows; default True, the whole window), `reads_future` (privileged `view.future`) and `reads_track`
+    (True: `view.track`, the pedestrians' longer past, for a predictor whose group rule reads it; default False)."""
 
     name: str
 
@@ -160,7 +161,8 @@ def decide(policy: Policy, env: CrowdNavEnv) -> Decision:
     """One step of the episode loop: the policy's decision on the env's view, its annotations attached to the
     frames drawn from now on. `env.step_decision(decision)` applies it (a control as it is)."""
     decision = policy.act(env.view(history=getattr(policy, "reads_history", True),
-                                   future=getattr(policy, "reads_future", False)))
+                                   future=getattr(policy, "reads_future", False),
+                                   track=getattr(policy, "reads_track", False)))
     if decision.annotated:
         env.annotate(decision.plan, decision.predictions, decision.predicted_group_id)
     return decision
@@ -212,6 +214,7 @@ class GPGraphPolicy(PlannerPolicy):
                  threads: int = 1, replan_every_steps: int = REPLAN_EVERY_STEPS,
                  env_timing: PredictionTiming | None = None) -> None:
         self.predictor = load_predictor_spec(predictor, threads, env_timing)
+        self.reads_track = bool(getattr(self.predictor, "reads_track", False))  # its group rule reads the track
         self.timing = PredictionTiming.of(self.predictor)
         self.n_samples = n_samples
         self.rng = np.random.default_rng(0)
@@ -225,7 +228,7 @@ class GPGraphPolicy(PlannerPolicy):
         p, t = view.pedestrians, view.timing
         if len(p.pos) == 0:
             return empty_prediction(t.pred_len, t.step_s)
-        samples, group_id = predict(self.predictor, view.history, self.n_samples, self.rng, t.pred_len)
+        samples, group_id = predict(self.predictor, view.history, self.n_samples, self.rng, t.pred_len, view.track)
         return PedPrediction(samples, p.radius, group_id, np.ones(len(p.pos), bool), current=p.pos,
                              history=view.history, step_s=t.step_s)
 

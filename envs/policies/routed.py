@@ -35,6 +35,7 @@ class RoutedPolicy:
             raise ValueError("+route needs MPCConfig.route (a RouteConfig; None turns the route off)")
         self.inner, self.name = inner, f"{inner.name}{ROUTE_SUFFIX}"
         self.reads_history = getattr(inner, "reads_history", True)
+        self.reads_track = getattr(inner, "reads_track", False)
         self.router = Router(config.route, config.wall_clearance_m)
         self._unicycle = config.robot.model == "unicycle"
         box = env.observation_space["robot"]

@@ -46,6 +46,7 @@ class ShieldedPolicy:
         # the constant-velocity future needs the window's last two rows; more if the wrapped policy reads more
         reads = getattr(inner, "reads_history", True)
         self.reads_history: bool | int = True if reads is True else max(2, int(reads))
+        self.reads_track = getattr(inner, "reads_track", False)
         self.name = f"{inner.name}{SHIELD_SUFFIX}"
         self.stats = PlanStats()
         self._previous: np.ndarray | None = None

@@ -164,3 +164,32 @@ def test_learned_agents_skip_the_history_window_and_planners_get_it():
         act(policy, env)
     assert seen["ppo-crowdnav"].history is None and seen["random"].history is None  # obs-only: not computed
     np.testing.assert_array_equal(seen["mpc-cv"].history, env.history_window())
+
+
+def test_mpc_gpgraph_groups_by_its_rule_on_the_pedestrians_track():
+    """With a rule that reads a track (`+coherent-motion-track`), mpc-gpgraph's groups come from each pedestrian's
+    last 19.2 s (`view.track`), not the 8 history rows alone; the default predictor and mpc-cv get no track."""
+    from envs.prediction import load_predictor_spec, predict
+    from predictor.group_rules import get_rule
+
+    env = CrowdNavEnv(replace(CFG, time_limit_s=20.0))
+    env.reset(seed=2)
+    gp = make_policy(PolicyConfig("mpc-gpgraph", predictor="gpgraph-stgcnn-synthetic+coherent-motion-track"), env)
+    default, cv = make_policy("mpc-gpgraph", env), make_policy("mpc-cv", env)
+    assert gp.reads_track and not default.reads_track and not getattr(cv, "reads_track", False)
+    seen = {}
+    real_act = gp.act
+    gp.act = lambda view: seen.__setitem__("view", view) or real_act(view)
+    gp.reset(0)
+    for _ in range(60):  # tracks longer than the window, shorter than 48 rows
+        env.step(act(gp, env))
+    view = seen["view"]
+    assert view.track.shape == (48, len(view.pedestrians.pos), 2)
+    assert view.track[-8:].tobytes() == view.history.tobytes()
+    seen_rows = (~np.isnan(view.track[..., 0])).sum(axis=0)  # per pedestrian; NaN only before it was first seen
+    assert 8 < seen_rows.max() <= len(env.track_history) < 48  # what was recorded since reset, on the 0.4 s grid
+    assert (seen_rows > 8).sum() > len(seen_rows) // 2
+    np.testing.assert_array_equal(env.frame().predicted_group_id, get_rule("coherent-motion-track")(view.track))
+    with pytest.raises(ValueError, match="reads no track"):
+        predict(load_predictor_spec("gpgraph-stgcnn-synthetic"), view.history, 4, np.random.default_rng(0), 12,
+                view.track)
