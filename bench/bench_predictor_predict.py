@@ -3,7 +3,9 @@
 Usage: python bench/bench_predictor_predict.py [--threads 1] [--repeats 50]
 Models: GP-Graph-SGCN (the published hotel checkpoint when ../shared is present, else random weights),
 GP-Graph-STGCNN (random weights: latency does not depend on the values), the same grouping by the coherent-motion
-rule instead of its learned assigner (``GPGraph.group_rule``, the env's default grouping) and constant velocity.
+rule instead of its learned assigner (``GPGraph.group_rule``, the env's default grouping), the same rule on a 48-row
+track (``coherent-motion-track``, its ``track`` argument; a quarter of the people seen for 8 rows only) and constant
+velocity.
 """
 
 from __future__ import annotations
@@ -20,20 +22,23 @@ from predictor import ConstantVelocityPredictor, GPGraph, GPGraphConfig, GPGraph
 REF = Path(__file__).resolve().parents[1] / ".." / "shared" / "reference" / "gpgraph_sgcn" / "hotel" / "val_best.pth"
 
 
-def history(n: int, rng: np.random.Generator) -> np.ndarray:
+def history(n: int, rng: np.random.Generator, rows: int = 8) -> np.ndarray:
     start = rng.uniform(-6, 6, size=(n, 2))
     vel = rng.normal(scale=0.5, size=(n, 2))
-    return start[None] + vel[None] * np.arange(8)[:, None, None]
+    return start[None] + vel[None] * np.arange(rows)[:, None, None]
 
 
 def latency_ms(pred, n: int, repeats: int, rng: np.random.Generator) -> tuple[float, float]:
-    h = history(n, rng)
+    track = history(n, rng, rows=48)
+    track[:40, : max(1, n // 4)] = np.nan  # some people seen for the window only
+    h = track[-8:].copy()
+    kwargs = {"track": track} if getattr(pred, "reads_track", False) else {}
     for _ in range(3):
-        pred.predict(h, n_samples=20, rng=rng)
+        pred.predict(h, n_samples=20, rng=rng, **kwargs)
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
-        pred.predict(h, n_samples=20, rng=rng)
+        pred.predict(h, n_samples=20, rng=rng, **kwargs)
         times.append(time.perf_counter() - t)
     return float(np.median(times) * 1e3), float(np.percentile(times, 95) * 1e3)
 
@@ -49,6 +54,8 @@ def main() -> None:
         "GP-Graph-SGCN": load_predictor(REF) if REF.is_file() else GPGraphPredictor(GPGraph(GPGraphConfig())),
         "GP-Graph-STGCNN": GPGraphPredictor(GPGraph(GPGraphConfig(backbone="stgcnn"))),
         "STGCNN + rule": GPGraphPredictor(GPGraph(GPGraphConfig(backbone="stgcnn"), group_rule="coherent-motion")),
+        "STGCNN + track rule": GPGraphPredictor(GPGraph(GPGraphConfig(backbone="stgcnn"),
+                                                        group_rule="coherent-motion-track")),
         "constant velocity": ConstantVelocityPredictor(),
     }
     print(f"threads {args.threads}, K = 20, {args.repeats} calls each; median / p95 ms")
