@@ -160,3 +160,21 @@ def test_groups_command_reads_tracks_for_rules_that_want_them(tmp_path: Path, ca
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "reads 48 positions per pedestrian" in err
     assert not (tmp_path / "p.npz").exists()
+
+
+@pytest.mark.slow
+def test_on_real_annotations_the_track_tells_groups_apart_better() -> None:
+    """Validation on the UCY annotations (RESULTS.md, "sim-to-real"): on students003's 522 windows the rule on each
+    person's last 48 positions (cut from the recording) beats the same rule on the 8 observed steps."""
+    from predictor.ethucy import DEFAULT_DATA_DIR
+    from predictor.group_validation import read_labelled, score_windows, summary
+
+    groups = DEFAULT_DATA_DIR.absolute().parent / "eth_ucy_groups" / "students003.groups.txt"
+    if not groups.is_file():
+        pytest.skip(f"UCY group annotations not found at {groups}")
+    rec = read_labelled(DEFAULT_DATA_DIR, groups, overlaps="merge", absent_ids="drop")
+    tracks = {id(w): t for w, t in zip(rec.windows, window_tracks(rec.rows, rec.windows, 48), strict=True)}
+    short = summary(score_windows(rec.windows, lambda w: get_rule("coherent-motion")(w.obs)))
+    long = summary(score_windows(rec.windows, lambda w: get_rule("coherent-motion-track")(tracks[id(w)])))
+    assert short["pw_f1"] == pytest.approx(0.821, abs=0.002) and long["pw_f1"] == pytest.approx(0.862, abs=0.002)
+    assert long["gmitre_f1"] > short["gmitre_f1"]
