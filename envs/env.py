@@ -225,10 +225,12 @@ class CrowdNavEnv(gym.Env):
                 raise ValueError(f"the crowd of scenario {self.config.scenario!r} cannot tell its future")
             t = self.timing
             ahead = self.crowd.future(p.ped_id, t.step_s * np.arange(1, t.pred_len + 1))
+        rows = self._history_rows(p, history)
+        whole = rows if rows is not None and len(rows) == self.timing.obs_len else None  # the track's newest rows
         return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),
-                          self.config.robot, p, self._history_rows(p, history),
+                          self.config.robot, p, rows,
                           np.asarray(self.crowd.walls, float).reshape(-1, 4), self.timing, self.config.dt_s, ahead,
-                          self.track_window(p) if track else None)
+                          self.track_window(p, whole) if track else None)
 
     def action_for(self, decision: Decision) -> np.ndarray:
         """The action (2,) float32 a policy's decision asks for: its action, or the action of its control."""
@@ -252,13 +254,15 @@ class CrowdNavEnv(gym.Env):
         tick = self.config.ticks_per_prediction_step
         return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s, rows)
 
-    def track_window(self, p: Pedestrians | None = None) -> np.ndarray:
+    def track_window(self, p: Pedestrians | None = None, window: np.ndarray | None = None) -> np.ndarray:
         """(TRACK_ROWS = 48, N, 2) m: the same pedestrians' longer past for a group rule (`predictor.api`'s `track`),
-        0.4 s apart, the last row now: its newest obs_len rows are `history_window`'s, the older ones their recorded
-        positions, NaN before each pedestrian was first seen (`envs.history.PedHistory.track_now`)."""
+        0.4 s apart, the last row now: its newest obs_len rows are `history_window`'s (`window`, when the caller has
+        it already), the older ones their recorded positions, NaN before each pedestrian was first seen
+        (`envs.history.PedHistory.track_now`)."""
         p = self.pedestrians() if p is None else p
+        window = self.history_window(p) if window is None else window
         tick = self.config.ticks_per_prediction_step
-        return self.track_history.track_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.history_window(p))
+        return self.track_history.track_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, window)
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped
@@ -342,8 +346,9 @@ class CrowdNavEnv(gym.Env):
         if self._predictor is None:  # torch is loaded only when predictions are observed
             self._predictor = load_predictor_spec(self.config.observation.predictor, threads=None, timing=self.timing)
         k = self.config.observation.n_prediction_samples
-        track = self.track_window() if getattr(self._predictor, "reads_track", False) else None
-        self._pred_samples, self._pred_groups = predict(self._predictor, self.history_window(), k, self._pred_rng,
+        window = self.history_window()
+        track = self.track_window(window=window) if getattr(self._predictor, "reads_track", False) else None
+        self._pred_samples, self._pred_groups = predict(self._predictor, window, k, self._pred_rng,
                                                         self.timing.pred_len, track)
 
     def _sensed(self, p: Pedestrians) -> Pedestrians:

@@ -16,8 +16,9 @@ import numpy as np
 from envs.timing import DEFAULT_TIMING
 
 EARLY_WINDOW_S = 0.4  # a pedestrian's velocity is measured over its first this-many seconds in view, s
-TRACK_ROWS = 48  # snapshots kept for the group rules' track (19.2 s at 0.4 s; chosen on the UCY validation, RESULTS.md
-# "sim-to-real"): the predictor's window is the newest obs_len of them
+# snapshots the env keeps for the group rules' track: 19.2 s at 0.4 s, `coherent-motion-track`'s length (chosen on the
+# UCY validation, RESULTS.md "sim-to-real")
+TRACK_ROWS = 48
 
 
 @dataclass
@@ -102,7 +103,15 @@ class PedHistory:
         observation (its first snapshot, or now if it came after the newest one) are extrapolated back at its
         early velocity (`extrapolate_back`). `rows` (1 .. length): only the newest rows, (rows, n, 2), the whole
         window's last rows exactly, from the newest snapshots only (cheaper)."""
-        return self._window_now(ped_id, pos, frac, step_s, rows)[0]
+        snaps, first = self._window(ped_id, None if frac == 0.0 else pos, rows)
+        out = _between_ticks(snaps, frac, pos)
+        seen = first < len(out)  # in a snapshot (else only now: the current position stands in)
+        if seen.all() and not first.any():
+            return out  # everyone seen for the whole window
+        anchor_row = np.where(seen, first, len(out) - 1)
+        anchor_pos = np.where(seen[:, None], snaps[np.minimum(first, len(out) - 1), np.arange(len(first))], pos)
+        lag = np.where(seen, frac * step_s, 0.0)
+        return extrapolate_back(out, anchor_row, anchor_pos, lag, self.early_velocity(ped_id), step_s)
 
     def track_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, window: np.ndarray) -> np.ndarray:
         """(length, n, 2) m: what a group rule reads (`predictor.api`'s `track`). Its newest rows are `window`
@@ -113,30 +122,10 @@ class PedHistory:
         if not 1 <= w <= self.length or window.shape[1:] != (len(ped_id), 2):
             raise ValueError(f"window must be (1..{self.length}, {len(ped_id)}, 2), got {window.shape}")
         snaps, first = self._window(ped_id, None if frac == 0.0 else pos)
-        out = snaps
-        if frac > 0.0:
-            out = np.empty_like(snaps)
-            out[:-1] = (1.0 - frac) * snaps[:-1] + frac * snaps[1:]
+        out = _between_ticks(snaps, frac, pos)  # a new array (`_window` makes one each call)
         out[np.arange(len(out))[:, None] < first[None]] = np.nan  # before its first snapshot (or only seen now)
         out[-w:] = window
         return out
-
-    def _window_now(self, ped_id: np.ndarray, pos: np.ndarray, frac: float, step_s: float,
-                    rows: int | None) -> tuple[np.ndarray, np.ndarray]:
-        """`window_now` and `_window`'s (n,) first rows."""
-        snaps, first = self._window(ped_id, None if frac == 0.0 else pos, rows)
-        out = snaps
-        if frac > 0.0:
-            out = np.empty_like(snaps)
-            out[:-1] = (1.0 - frac) * snaps[:-1] + frac * snaps[1:]
-            out[-1] = pos
-        seen = first < len(out)  # in a snapshot (else only now: the current position stands in)
-        if seen.all() and not first.any():
-            return out, first  # everyone seen for the whole window
-        anchor_row = np.where(seen, first, len(out) - 1)
-        anchor_pos = np.where(seen[:, None], snaps[np.minimum(first, len(out) - 1), np.arange(len(first))], pos)
-        lag = np.where(seen, frac * step_s, 0.0)
-        return extrapolate_back(out, anchor_row, anchor_pos, lag, self.early_velocity(ped_id), step_s), first
 
     def window(self, ped_id: np.ndarray, current: np.ndarray | None = None) -> np.ndarray:
         """(length, n, 2) m history of pedestrians ped_id (n,), oldest first; the last row is the newest
@@ -180,6 +169,17 @@ class PedHistory:
             older = set().union(*(ids.tolist() for ids, _ in kept[: len(kept) - length]))
             first[[k for k in late.tolist() if int(ped_id[k]) in older]] = 0
         return out, first
+
+
+def _between_ticks(snaps: np.ndarray, frac: float, pos: np.ndarray) -> np.ndarray:
+    """Rows (L, n, 2) m `frac` of a snapshot interval after `snaps`' (L, n, 2): each interpolated between its
+    snapshot and the next, the newest one `pos` (n, 2) now; `snaps` itself on the tick (frac 0)."""
+    if frac == 0.0:
+        return snaps
+    out = np.empty_like(snaps)
+    out[:-1] = (1.0 - frac) * snaps[:-1] + frac * snaps[1:]
+    out[-1] = pos
+    return out
 
 
 def extrapolate_back(window: np.ndarray, anchor_row: np.ndarray, anchor_pos: np.ndarray, anchor_lag_s: np.ndarray,
