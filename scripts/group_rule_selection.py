@@ -30,8 +30,7 @@ import numpy as np
 
 from predictor.ethucy import DEFAULT_DATA_DIR
 from predictor.group_rules import CoherentMotionRule, GroupRule, ProximityRule
-from predictor.group_validation import read_annotations, summary
-from predictor.metrics import GroupScores
+from predictor.group_validation import read_annotations, score_windows, summary
 from predictor.windows import window_tracks
 
 DISTANCES_M = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0)
@@ -90,9 +89,10 @@ def select(recordings: list, track_steps: int) -> dict:
     """Score the grid on ``track_steps`` positions per pedestrian (8: each window's observed steps exactly); print
     the choice and the leave-one-file-out scores per family."""
     files = [r.name for r in recordings]
-    seen = {r.name: window_tracks(r.rows, r.windows, track_steps) for r in recordings}
-    scores = {name: {r.name: summary(score_windows_of(r.windows, seen[r.name], rule)) for r in recordings}
-              for name, rule in grid(track_steps).items()}
+    track = {id(w): t for r in recordings
+             for w, t in zip(r.windows, window_tracks(r.rows, r.windows, track_steps), strict=True)}
+    scores = {name: {r.name: summary(score_windows(r.windows, lambda w, rule=rule: rule(track[id(w)])))
+                     for r in recordings} for name, rule in grid(track_steps).items()}
     out: dict = {"files": files, "scores": scores, "chosen": {}, "leave_one_file_out": {}}
     print(f"{'family':<20} {'chosen on all three':<34} " + " ".join(f"{f:>14}" for f in files) + "   mean PW/G-MITRE")
     for fam in sorted({family(n) for n in scores}):
@@ -108,14 +108,6 @@ def select(recordings: list, track_steps: int) -> dict:
         mean = (np.mean([s["pw_f1"] for _, s in lofo.values()]), np.mean([s["gmitre_f1"] for _, s in lofo.values()]))
         print(f"{'':<20} {'leave-one-file-out':<34} {cells}   {mean[0]:.3f}/{mean[1]:.3f}")
     return out
-
-
-def score_windows_of(windows: list, tracks: list[np.ndarray], rule: GroupRule) -> GroupScores:
-    """The rule's groups on each window's track against the window's annotation."""
-    scores = GroupScores()
-    for w, track in zip(windows, tracks, strict=True):
-        scores.add(w.group_id, rule(track))
-    return scores
 
 
 if __name__ == "__main__":
