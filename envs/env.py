@@ -211,11 +211,13 @@ class CrowdNavEnv(gym.Env):
             self._peds_cache = (self._state, peds)
         return peds
 
-    def view(self, history: bool | int = True, future: bool = False, track: bool = False) -> PolicyView:
+    def view(self, history: bool | int = True, future: bool = False, track: bool = False,
+             future_s: float = 0.0) -> PolicyView:
         """What a policy reads now (`envs.view.PolicyView`): the last observation and the typed scene, copies; the
         history window only when asked for (True; an int k: its newest k rows only, as `history_window`); the
-        pedestrians' true future only when asked for (reference policies); their track (`track_window`) only when
-        asked for (policies whose predictor groups by a rule)."""
+        pedestrians' true future only when asked for (reference policies): `pred_len` steps, or as many as cover
+        `future_s` seconds where that is longer (a reference that plans farther than the predictor sees); their
+        track (`track_window`) only when asked for (policies whose predictor groups by a rule)."""
         if not self._obs:
             raise RuntimeError("view() before reset()")
         p = self._sensed(self.pedestrians())
@@ -224,7 +226,8 @@ class CrowdNavEnv(gym.Env):
             if not hasattr(self.crowd, "future"):
                 raise ValueError(f"the crowd of scenario {self.config.scenario!r} cannot tell its future")
             t = self.timing
-            ahead = self.crowd.future(p.ped_id, t.step_s * np.arange(1, t.pred_len + 1))
+            steps = max(t.pred_len, math.ceil(future_s / t.step_s - 1e-9))
+            ahead = self.crowd.future(p.ped_id, t.step_s * np.arange(1, steps + 1))
         rows = self._history_rows(p, history)
         whole = rows if rows is not None and len(rows) == self.timing.obs_len else None  # the track's newest rows
         return PolicyView({k: v.copy() for k, v in self._obs.items()}, self.robot_state.copy(), self.goal.copy(),

@@ -145,7 +145,8 @@ def _json_safe(obj: Any) -> Any:
 class Policy(Protocol):
     """What the episode loop needs of a policy. Optional: `stats` (a `planner.PlanStats`), and `reads_history`
     (False: the policy reads no `view.history`, which is then None and not computed; an int k: only the window's
-    newest k rows; default True, the whole window), `reads_future` (privileged `view.future`) and `reads_track`
+    newest k rows; default True, the whole window), `reads_future` (privileged `view.future`; `future_s`, s: at least
+    this much of it, where longer than the predictor's horizon) and `reads_track`
     (True: `view.track`, the pedestrians' longer past, for a predictor whose group rule reads it; default False)."""
 
     name: str
@@ -162,6 +163,7 @@ def decide(policy: Policy, env: CrowdNavEnv) -> Decision:
     frames drawn from now on. `env.step_decision(decision)` applies it (a control as it is)."""
     decision = policy.act(env.view(history=getattr(policy, "reads_history", True),
                                    future=getattr(policy, "reads_future", False),
+                                   future_s=getattr(policy, "future_s", 0.0),
                                    track=getattr(policy, "reads_track", False)))
     if decision.annotated:
         env.annotate(decision.plan, decision.predictions, decision.predicted_group_id)
@@ -258,6 +260,7 @@ class OraclePolicy(PlannerPolicy):
 
     def __init__(self, config: MPCConfig, replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
         super().__init__("mpc-oracle", MPCPlanner(config), oracle_prediction, replan_every_steps)
+        self.future_s = config.horizon_steps * config.dt_s  # the whole horizon known, however long (--mpc)
 
 
 class HalfOraclePolicy(GPGraphPolicy):

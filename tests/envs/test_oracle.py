@@ -68,6 +68,7 @@ def _for(name: str, config: CrowdNavConfig) -> CrowdNavConfig:
     """`config` with the robot a registry policy runs and the wall rays a packaged agent was trained with."""
     from envs.evaluation.benchmark import observed
     from envs.policies import PolicyConfig
+    from envs.policies.registry import ENV_MPC
     from envs.policies.identity import agent_wall_rays
 
     return observed(replace(config, robot=_robot_for(name)), agent_wall_rays(PolicyConfig(name)))
@@ -141,3 +142,25 @@ def test_the_halves_take_one_output_each_from_the_truth():
     np.testing.assert_array_equal(half_groups.positions, predicted.positions)
     np.testing.assert_array_equal(half_groups.group_ids, view.pedestrians.group_id)
     assert len(np.unique(view.pedestrians.group_id)) < len(view.pedestrians.group_id)  # real groups in this crowd
+
+
+def test_an_oracle_that_plans_farther_than_the_predictor_sees_its_whole_horizon():
+    """mpc-oracle with a 12 s horizon (--mpc horizon_steps=30) reads 30 rows of the true future, the first 12 the
+    same as the default oracle's (the fork is deterministic); the default horizon (4 s) keeps the predictor's 12."""
+    from envs.policies import PolicyConfig
+    from envs.policies.registry import ENV_MPC
+
+    env = CrowdNavEnv(CrowdNavConfig(scenario="corridor", n_pedestrians=10, robot_visible=False))
+    env.reset(seed=2)
+    for _ in range(5):
+        env.step(ACTION)
+    short = make_policy("mpc-oracle", env)
+    far = make_policy(PolicyConfig("mpc-oracle", mpc=replace(ENV_MPC, horizon_steps=30)), env)
+    assert short.future_s == pytest.approx(4.0) and far.future_s == pytest.approx(12.0)
+    near_view = env.view(future=True, future_s=short.future_s)
+    far_view = env.view(future=True, future_s=far.future_s)
+    assert near_view.future.shape[0] == 12 and far_view.future.shape[0] == 30
+    np.testing.assert_array_equal(far_view.future[:12], near_view.future)
+    far.reset(0)
+    decision = far.act(far_view)
+    assert decision.predictions.shape[1] == 30 and decision.plan.shape == (31, 2)
