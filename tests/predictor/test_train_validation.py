@@ -73,6 +73,12 @@ def test_val_fraction_trains_and_says_where_it_validates(tmp_path: Path, capsys)
     assert "has its own val/ split" in capsys.readouterr().err and not (tmp_path / "run2").exists()
 
 
+def _ctrl_c_default() -> None:
+    """In the child: Ctrl-C as in a terminal, even when this test runs where SIGINT is ignored (a shell's
+    background job), which the child would inherit."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _epochs(out: Path) -> list[int]:
     with (out / "log.csv").open(newline="") as f:
         return [int(r["epoch"]) for r in csv.DictReader(f)]
@@ -86,7 +92,8 @@ def test_ctrl_c_in_train_is_one_line_exit_130_and_resume_continues(synthetic_dat
             "--batch-size", "8", "--quiet", "--eval-every", "0"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen([*argv, "--epochs", "100000"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True,
+                            preexec_fn=_ctrl_c_default)
     deadline = time.monotonic() + 120
     while not (out / "last.pt").is_file() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.2)
