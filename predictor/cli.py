@@ -1,7 +1,8 @@
 """``gpgraph`` command line: train, evaluate, predict.
 
-Examples::
+Examples (the first: a check that training runs, under a minute; the second: the full recipe, hours)::
 
+    gpgraph train --data ../shared/datasets/eth_ucy/hotel --out runs/hotel-quick --max-windows 512 --epochs 5
     gpgraph train --data ../shared/datasets/eth_ucy/hotel --backbone stgcnn --out runs/hotel --threads 2 \
         --eval-every 10
     gpgraph evaluate --checkpoint runs/hotel/best.pt --data ../shared/datasets/eth_ucy/hotel \
@@ -346,8 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "frames and train on the rest (no window crosses the cut); without it such DATA is an "
                         "error (default: DATA/val)")
     t.add_argument("--max-windows", type=int, default=0,
-                   help="use only the first N training and N validation windows (a quick run: 64 windows and "
-                        "--epochs 2 take about a minute)")
+                   help="use only the first N training and N validation windows (a quick check: 512 windows and "
+                        "--epochs 5 take under a minute; 0: all)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     t.add_argument("--init", default="", metavar="CHECKPOINT",
                    help="start from this checkpoint's weights (packaged name or path; same architecture), e.g. "

@@ -5,7 +5,8 @@ uses) and ``last.pt`` (model, optimiser, scheduler, epoch and rng state, for ``r
 tensors whatever the training device. One row per epoch goes to ``log.csv`` (``LOG_FIELDS``): losses, the
 learning rate, seconds, and every ``eval_every`` epochs the validation best-of-20 ADE/FDE (m) of the 'iid'
 protocol (one trial, seed ``VAL_EVAL_SEED``), empty on the other epochs. The checkpoint is still selected
-by the validation loss alone.
+by the validation loss alone. Ctrl-C raises ``TrainInterrupted``, whose message says which epoch last.pt holds;
+``resume`` continues from the next.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """Train a PPO agent on `crowdnav/CrowdNav-v1`: `python -m envs.rl.train` or `crowdnav train`.
 
+    crowdnav train --quick --out out/train/quick               # a check that training runs (minutes, 4,096 steps)
     crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --steps 1000000 --out out/train/cc5
     crowdnav train --config run.toml --warm-start bc          # flags override the file's values
-    crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint
+    crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint (or a Ctrl-C)
     crowdnav train --suite crowdnav-classic --decision-every-steps 5 --warm-start dagger --demo-policy mpc-cv
                                                                # a benchmark cell's env, a decision every 0.25 s
 
