@@ -73,7 +73,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight, assigner=args.assigner)
     cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
                       bucket=args.bucket, max_pairs=args.max_pairs,
-                      seed=args.seed, eval_every=args.eval_every, init=args.init, model=model_cfg)
+                      seed=args.seed, eval_every=args.eval_every, init=args.init,
+                      val_fraction=args.val_fraction, model=model_cfg)
     if args.init:  # a missing, corrupt or mismatched checkpoint is reported before any data is read
         initial_weights(GPGraph(model_cfg), args.init)
     train_w, val_w, val_source = train_val_windows(args.data, args.val_fraction)

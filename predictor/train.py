@@ -31,6 +31,7 @@ from predictor.files import write_atomic
 from predictor.gaussian import masked_nll
 from predictor.grouping import pair_mask
 from predictor.model import GPGraph, GPGraphConfig
+from predictor.train_split import check_val_fraction
 from predictor.windows import Window, augment_rotations
 
 LOG_FIELDS = ("epoch", "train_loss", "val_loss", "lr", "seconds", "val_ade", "val_fde")
@@ -59,6 +60,8 @@ class TrainConfig:
         init: a checkpoint (packaged name or path) whose weights start the training instead of random ones
             (fine-tuning, e.g. from a crowdsim-trained model); its architecture must equal ``model``'s (loss
             weights such as ``bce_weight`` may differ); "" = random initial weights.
+        val_fraction: where the validation windows came from, recorded with the checkpoints: None = the data's
+            own val/ split; F = the last F of each recording's frames (``predictor.train_split``).
     """
 
     epochs: int = 300
@@ -74,6 +77,7 @@ class TrainConfig:
     seed: int = 0
     eval_every: int = 10
     init: str = ""
+    val_fraction: float | None = None
     model: GPGraphConfig = field(default_factory=GPGraphConfig)
 
     def __post_init__(self) -> None:
@@ -81,6 +85,8 @@ class TrainConfig:
             raise ValueError("epochs, batch_size and bucket must be >= 1 and max_pairs >= 0")
         if self.eval_every < 0:
             raise ValueError(f"eval_every must be >= 0 (0: off), got {self.eval_every}")
+        if self.val_fraction is not None:
+            check_val_fraction(self.val_fraction)
         if self.lr <= 0 or self.weight_decay < 0 or self.clip_grad <= 0 or not 0 < self.gamma <= 1:
             raise ValueError("need lr > 0, weight_decay >= 0, clip_grad > 0 and 0 < gamma <= 1")
 

@@ -21,8 +21,8 @@ from predictor.windows import Window, load_windows, recording_windows
 def check_val_fraction(fraction: float) -> float:
     """``fraction`` if it is in (0, 0.5]; ValueError otherwise."""
     if not 0.0 < fraction <= 0.5:
-        raise ValueError(f"--val-fraction must be in (0, 0.5] (the share of each recording's frames held out), "
-                         f"got {fraction}")
+        raise ValueError(f"val_fraction (--val-fraction) must be in (0, 0.5] (the share of each recording's frames "
+                         f"held out), got {fraction}")
     return fraction
 
 

@@ -40,6 +40,8 @@ def test_a_folder_without_val_is_an_error_that_names_the_fix_and_writes_nothing(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "has no val/ folder" in err and "--val-fraction" in err
     assert not (tmp_path / "run").exists()
+    assert _train(tmp_path / "flat", tmp_path / "run", "--val-fraction", "0.9") == 2  # most of the data: refused
+    assert "must be in (0, 0.5]" in capsys.readouterr().err and not (tmp_path / "run").exists()
     (tmp_path / "split" / "val").mkdir(parents=True)  # ... and the same with train/ but no val/ files
     write_synthetic_split(tmp_path / "split" / "train", n_frames=60)
     (tmp_path / "split" / "val").rmdir()
@@ -66,7 +68,8 @@ def test_val_fraction_trains_and_says_where_it_validates(tmp_path: Path, capsys)
     assert _train(tmp_path / "flat", tmp_path / "run", "--val-fraction", "0.25") == 0
     out = capsys.readouterr().out  # 75 frames give 75 - 19 windows, 25 give 6
     assert "56 training / 6 validation windows (validation: the last 0.25 of each recording's frames" in out
-    assert read_file(tmp_path / "run" / "best.pt")["meta"]["epoch"] == 0
+    meta = read_file(tmp_path / "run" / "best.pt")["meta"]
+    assert meta["epoch"] == 0 and meta["train"]["val_fraction"] == 0.25  # the checkpoint says what chose it
     write_synthetic_split(tmp_path / "split" / "train")  # a val/ folder is used, and a fraction beside it refused
     write_synthetic_split(tmp_path / "split" / "val", seed=1)
     assert _train(tmp_path / "split", tmp_path / "run2", "--val-fraction", "0.25") == 2
