@@ -75,3 +75,14 @@ def test_ctrl_c_saves_a_state_that_resume_continues_and_best_is_a_trained_agent(
     assert f"resumed {out} at step {steps}" in resumed.stdout
     assert json.loads((out / "checkpoints" / "state.json").read_text())["steps"] == steps + 128
     assert _eval_steps(out)[-1] == steps + 128 and _eval_steps(out).count(0) == 1
+
+
+def test_ctrl_c_before_the_first_checkpoint_says_there_is_nothing_to_resume(tmp_path):
+    from envs.rl.train import TrainConfig, interrupted
+
+    cfg = TrainConfig()
+    assert str(interrupted(None, None, cfg, tmp_path)) == (
+        f"interrupted before the first checkpoint, nothing to resume in {tmp_path}; rerun the command")
+    (tmp_path / "demos.npz").write_bytes(b"")  # the warm start's demonstrations were saved before Ctrl-C
+    assert str(interrupted(None, None, cfg, tmp_path)).endswith(f"(add --demos {tmp_path / 'demos.npz'} to reuse the "
+                                                                 "demonstrations)")
