@@ -1,7 +1,8 @@
 """``gpgraph`` command line: train, evaluate, predict.
 
-Examples::
+Examples (the first: a check that training runs, under a minute; the second: the full recipe, hours)::
 
+    gpgraph train --data ../shared/datasets/eth_ucy/hotel --out runs/hotel-quick --max-windows 512 --epochs 5
     gpgraph train --data ../shared/datasets/eth_ucy/hotel --backbone stgcnn --out runs/hotel --threads 2 \
         --eval-every 10
     gpgraph evaluate --checkpoint runs/hotel/best.pt --data ../shared/datasets/eth_ucy/hotel \
@@ -32,7 +33,7 @@ import numpy as np
 import torch
 
 from predictor.checkpoint import CheckpointError, load_model
-from predictor.data import DataFormatError, check_data_step
+from predictor.data import DataFormatError
 from predictor.device import DEVICES, resolve_device
 from predictor.ethucy import DEFAULT_DATA_DIR, GROUP_OVERLAPS, OBS_LEN
 from predictor.evaluate import EvalConfig, evaluate
@@ -43,6 +44,7 @@ from predictor.grouping import THRESHOLD_MODES
 from predictor.model import ASSIGNERS, GPGraph, GPGraphConfig, check_group_threshold_scale
 from predictor.sampling import PROTOCOLS
 from predictor.train import TrainConfig, initial_weights, train
+from predictor.train_split import train_val_windows
 from predictor.windows import load_windows
 
 METRIC_KEYS = ("ade", "fde", "col", "tcc", "pw_precision", "pw_recall", "gmitre_precision", "gmitre_recall")
@@ -71,16 +73,15 @@ def cmd_train(args: argparse.Namespace) -> int:
         backbone=args.backbone, grouping=args.grouping, bce_weight=args.bce_weight, assigner=args.assigner)
     cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, rotate=args.rotate,
                       bucket=args.bucket, max_pairs=args.max_pairs,
-                      seed=args.seed, eval_every=args.eval_every, init=args.init, model=model_cfg)
+                      seed=args.seed, eval_every=args.eval_every, init=args.init,
+                      val_fraction=args.val_fraction, model=model_cfg)
     if args.init:  # a missing, corrupt or mismatched checkpoint is reported before any data is read
         initial_weights(GPGraph(model_cfg), args.init)
-    for split in ("train", "val"):
-        check_data_step(split_folder(args.data, split))
-    train_w = _windows(args.data, "train")[: args.max_windows or None]
-    val_w = _windows(args.data, "val")[: args.max_windows or None]
+    train_w, val_w, val_source = train_val_windows(args.data, args.val_fraction)
+    train_w, val_w = train_w[: args.max_windows or None], val_w[: args.max_windows or None]
     labelled = sum(w.group_id is not None for w in train_w)
-    print(f"{len(train_w)} training / {len(val_w)} validation windows; group labels in {labelled} of the "
-          "training windows", flush=True)
+    print(f"{len(train_w)} training / {len(val_w)} validation windows (validation: {val_source}); group labels "
+          f"in {labelled} of the training windows", flush=True)
     if args.bce_weight > 0 and labelled == 0:
         raise ValueError(f"--bce-weight {args.bce_weight} needs group labels (X.groups.txt or X.labels.tsv beside "
                          f"the trajectory files), and {split_folder(args.data, 'train')} has none")
@@ -322,10 +323,11 @@ def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="gpgraph", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
-    t = sub.add_parser("train", help="train on DATA/train, select by DATA/val loss")
+    t = sub.add_parser("train", help="train on DATA/train, select by DATA/val loss (or a held-out --val-fraction)")
     _common(t)
     t.add_argument("--data", type=Path, required=True,
-                   help="a split folder with train/ and val/ ETH/UCY files, e.g. ../shared/datasets/eth_ucy/eth")
+                   help="a split folder with train/ and val/ ETH/UCY files, e.g. ../shared/datasets/eth_ucy/eth "
+                        "(or a folder of files with --val-fraction)")
     t.add_argument("--out", type=Path, required=True,
                    help="run folder: best.pt (lowest validation loss), last.pt (for --resume), log.csv")
     t.add_argument("--no-groups", action="store_true", help="the backbone alone (no GP-Graph branches)")
@@ -341,7 +343,13 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--assigner", choices=ASSIGNERS, default="conv",
                    help="pair distance D: conv (GP-Graph's F_phi) or pairwise (predictor.pair_assigner)")
     t.add_argument("--seed", type=int, default=0, help="initial weights, batch order and latent draws")
-    t.add_argument("--max-windows", type=int, default=0, help="use only the first N windows (smoke tests)")
+    t.add_argument("--val-fraction", type=float, default=None, metavar="F",
+                   help="for DATA without a val/ folder: validate on the last F (0 < F <= 0.5) of each recording's "
+                        "frames and train on the rest (no window crosses the cut); without it such DATA is an "
+                        "error (default: DATA/val)")
+    t.add_argument("--max-windows", type=int, default=0,
+                   help="use only the first N training and N validation windows (a quick check: 512 windows and "
+                        "--epochs 5 take under a minute; 0: all)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     t.add_argument("--init", default="", metavar="CHECKPOINT",
                    help="start from this checkpoint's weights (packaged name or path; same architecture), e.g. "
@@ -413,6 +421,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``gpgraph`` entry point: exit 0, 2 on misuse (one line on stderr), 130 on Ctrl-C (one line: what was
+    kept; an interrupted ``train`` resumes with ``--resume``)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:
+        print(f"gpgraph: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "list":
         return cmd_list(args)

@@ -5,7 +5,8 @@ uses) and ``last.pt`` (model, optimiser, scheduler, epoch and rng state, for ``r
 tensors whatever the training device. One row per epoch goes to ``log.csv`` (``LOG_FIELDS``): losses, the
 learning rate, seconds, and every ``eval_every`` epochs the validation best-of-20 ADE/FDE (m) of the 'iid'
 protocol (one trial, seed ``VAL_EVAL_SEED``), empty on the other epochs. The checkpoint is still selected
-by the validation loss alone.
+by the validation loss alone. Ctrl-C raises ``TrainInterrupted``, whose message says which epoch last.pt holds;
+``resume`` continues from the next.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from predictor.files import write_atomic
 from predictor.gaussian import masked_nll
 from predictor.grouping import pair_mask
 from predictor.model import GPGraph, GPGraphConfig
+from predictor.train_split import check_val_fraction
 from predictor.windows import Window, augment_rotations
 
 LOG_FIELDS = ("epoch", "train_loss", "val_loss", "lr", "seconds", "val_ade", "val_fde")
@@ -58,6 +60,8 @@ class TrainConfig:
         init: a checkpoint (packaged name or path) whose weights start the training instead of random ones
             (fine-tuning, e.g. from a crowdsim-trained model); its architecture must equal ``model``'s (loss
             weights such as ``bce_weight`` may differ); "" = random initial weights.
+        val_fraction: where the validation windows came from, recorded with the checkpoints: None = the data's
+            own val/ split; F = the last F of each recording's frames (``predictor.train_split``).
     """
 
     epochs: int = 300
@@ -73,6 +77,7 @@ class TrainConfig:
     seed: int = 0
     eval_every: int = 10
     init: str = ""
+    val_fraction: float | None = None
     model: GPGraphConfig = field(default_factory=GPGraphConfig)
 
     def __post_init__(self) -> None:
@@ -80,6 +85,8 @@ class TrainConfig:
             raise ValueError("epochs, batch_size and bucket must be >= 1 and max_pairs >= 0")
         if self.eval_every < 0:
             raise ValueError(f"eval_every must be >= 0 (0: off), got {self.eval_every}")
+        if self.val_fraction is not None:
+            check_val_fraction(self.val_fraction)
         if self.lr <= 0 or self.weight_decay < 0 or self.clip_grad <= 0 or not 0 < self.gamma <= 1:
             raise ValueError("need lr > 0, weight_decay >= 0, clip_grad > 0 and 0 < gamma <= 1")
 
@@ -219,15 +226,18 @@ def validation_ade_fde(model: GPGraph, windows: list[Window]) -> tuple[float, fl
     return res["ade"], res["fde"]
 
 
-def _start_log(path: Path, fresh: bool) -> None:
-    """Write the header of a new ``log.csv``; on resume, upgrade a log with fewer columns (an older version's)
-    to ``LOG_FIELDS``, its old rows padded with empty cells."""
-    if fresh or not path.is_file():
+def _start_log(path: Path, start: int) -> None:
+    """Write the header of a new ``log.csv`` (``start`` 0); on resume at epoch ``start``, drop the rows of epochs
+    >= ``start`` (logged by a run stopped before its last.pt was saved) and upgrade a log with fewer columns (an
+    older version's) to ``LOG_FIELDS``, its old rows padded with empty cells."""
+    if start == 0 or not path.is_file():
         path.write_text(",".join(LOG_FIELDS) + "\n")
         return
     with path.open(newline="") as f:
         rows = list(csv.reader(f))
-    if rows and tuple(rows[0]) != LOG_FIELDS:
+    kept = [r for r in rows[1:] if r and r[0].isdigit() and int(r[0]) < start]
+    if rows and (tuple(rows[0]) != LOG_FIELDS or len(kept) != len(rows) - 1):
+        rows = rows[:1] + kept
         width = len(LOG_FIELDS)
 
         def write(tmp: str) -> None:
@@ -261,6 +271,54 @@ def architecture_differences(a: GPGraphConfig, b: GPGraphConfig, a_label: str = 
                      if mine.get(k) != theirs.get(k))
 
 
+class TrainInterrupted(KeyboardInterrupt):
+    """Ctrl-C during ``train``; ``str()`` says in one line what was kept and how to continue. Still a
+    KeyboardInterrupt, so code that stops on Ctrl-C keeps doing so."""
+
+
+def interrupted_message(out: Path) -> str:
+    """What an interrupted run left in ``out``, from its last.pt (the last complete epoch, if any)."""
+    if not (out / "last.pt").is_file():
+        return f"no epoch completed, nothing to resume in {out}; rerun the command to start again"
+    last_done = int(read_file(out / "last.pt")["epoch"])
+    return (f"epochs up to {last_done} saved in {out / 'last.pt'} (best.pt: the lowest validation loss so far); "
+            f"rerun the command with --resume to continue at epoch {last_done + 1}")
+
+
+def _run_epoch(cfg: TrainConfig, model: GPGraph, opt, sched, rng: np.random.Generator, train_windows: list[Window],
+               val_windows: list[Window], val_batches: list[Batch], out: Path, epoch: int, best: float,
+               last_eval: tuple[float | None, float | None]) -> tuple[float, float | None, float | None, float, float]:
+    """One epoch: train, validate, log, and save best.pt (when the validation loss improved) and then last.pt
+    (the resumable state; a log row of an epoch without it is dropped on resume). Returns (best validation loss,
+    the latest validation ADE and FDE, m, this epoch's training and validation losses)."""
+    tic = time.perf_counter()
+    windows = augment_rotations(train_windows, rng) if cfg.rotate else train_windows
+    steps = make_batches(windows, cfg.batch_size, cfg.bucket, rng, cfg.pair_budget)
+    tr = train_epoch(model, steps, opt, cfg.clip_grad)
+    va = validation_loss(model, val_batches)
+    ade, fde = last_eval
+    evaluated = cfg.evaluates_at(epoch)
+    if evaluated:
+        ade, fde = validation_ade_fde(model, val_windows)
+    lr = opt.param_groups[0]["lr"]
+    sched.step()
+    if va < best:
+        best = va
+        save_model(model, out / "best.pt", meta={"epoch": epoch, "val_loss": va, "train": cfg.to_dict(),
+                                                 META_STEP_S: STEP_S})
+    metrics = [f"{ade:.6f}", f"{fde:.6f}"] if evaluated else ["", ""]
+    with (out / "log.csv").open("a", newline="") as f:
+        csv.writer(f).writerow([epoch, f"{tr:.6f}", f"{va:.6f}", f"{lr:.6g}", f"{time.perf_counter() - tic:.2f}",
+                                *metrics])
+    save_atomic(
+        {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
+         "optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
+         "best_val": best, "rng": rng.bit_generator.state, "meta": {"train": cfg.to_dict(), META_STEP_S: STEP_S}},
+        out / "last.pt",
+    )
+    return best, ade, fde, tr, va
+
+
 def train(
     cfg: TrainConfig, train_windows: list[Window], val_windows: list[Window], out: str | Path,
     resume: bool = False, progress: bool = True, device: torch.device | str = "cpu",
@@ -287,36 +345,18 @@ def train(
         start, best = _resume(out, model, opt, sched, rng)
     val_batches = [b.to(device) for b in eval_batches(val_windows, cfg.batch_size, cfg.pair_budget)]
     log_path = out / "log.csv"
-    _start_log(log_path, fresh=start == 0)
+    _start_log(log_path, start)
     t0 = time.perf_counter()
     ade = fde = None
     bar = tqdm(range(start, cfg.epochs), disable=not progress, desc="train", unit="epoch")
-    for epoch in bar:
-        tic = time.perf_counter()
-        windows = augment_rotations(train_windows, rng) if cfg.rotate else train_windows
-        steps = make_batches(windows, cfg.batch_size, cfg.bucket, rng, cfg.pair_budget)
-        tr = train_epoch(model, steps, opt, cfg.clip_grad)
-        va = validation_loss(model, val_batches)
-        evaluated = cfg.evaluates_at(epoch)
-        if evaluated:
-            ade, fde = validation_ade_fde(model, val_windows)
-        lr = opt.param_groups[0]["lr"]
-        sched.step()
-        if va < best:
-            best = va
-            save_model(model, out / "best.pt", meta={"epoch": epoch, "val_loss": va, "train": cfg.to_dict(),
-                                                     META_STEP_S: STEP_S})
-        metrics = [f"{ade:.6f}", f"{fde:.6f}"] if evaluated else ["", ""]
-        with log_path.open("a", newline="") as f:
-            csv.writer(f).writerow([epoch, f"{tr:.6f}", f"{va:.6f}", f"{lr:.6g}", f"{time.perf_counter() - tic:.2f}",
-                                    *metrics])
-        save_atomic(
-            {"format": FORMAT, "config": model.config.to_dict(), "state_dict": model.state_dict(),
-             "optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
-             "best_val": best, "rng": rng.bit_generator.state, "meta": {"train": cfg.to_dict(), META_STEP_S: STEP_S}},
-            out / "last.pt",
-        )
-        shown = {} if ade is None else {"ade": f"{ade:.3f}", "fde": f"{fde:.3f}"}  # the latest evaluation
-        bar.set_postfix(train=f"{tr:.3f}", val=f"{va:.3f}", best=f"{best:.3f}", **shown)
+    try:
+        for epoch in bar:
+            best, ade, fde, tr, va = _run_epoch(cfg, model, opt, sched, rng, train_windows, val_windows,
+                                                val_batches, out, epoch, best, (ade, fde))
+            shown = {} if ade is None else {"ade": f"{ade:.3f}", "fde": f"{fde:.3f}"}  # the latest evaluation
+            bar.set_postfix(train=f"{tr:.3f}", val=f"{va:.3f}", best=f"{best:.3f}", **shown)
+    except KeyboardInterrupt:
+        bar.close()
+        raise TrainInterrupted(interrupted_message(out)) from None
     return {"best_val": best, "epochs": cfg.epochs, "seconds": time.perf_counter() - t0, "val_ade": ade,
             "val_fde": fde}

@@ -126,6 +126,15 @@ def test_every_readme_command_line_is_a_valid_invocation():
         parsers[argv[0]]().parse_args(argv[1:])  # SystemExit (exit 2) on any unknown or malformed option
 
 
+def test_training_docs_show_the_smallest_run_first():
+    """A new user meets a one-minute training run before the full-size recipe (hours), in each training page; the
+    run-with-small-sizes test below runs both."""
+    for doc, command, small in (("predictor", ["gpgraph", "train"], "--max-windows"),
+                                ("rl", ["crowdnav", "train"], "--quick")):
+        runs = [c for c in cli_commands() if c[:2] == command]  # in the order of README, then docs/ pages
+        assert small in runs[0] and small not in runs[1], (doc, runs[:2])  # the smallest, then the full-size one
+
+
 # Shortened only through documented options (README: "Every command of this README and of docs/ runs in the test
 # suite with small sizes").
 SMALL = {"--duration": "6", "--pedestrians": "8", "--seeds-per-scenario": "3", "--episodes": "1", "--workers": "1",
@@ -157,6 +166,7 @@ def _small(argv: list[str], shared: Path, tmp_path: Path) -> list[str] | None:
         steps = "512" if "--resume" in argv else "256"
         out = [steps if prev == "--steps" else tok for prev, tok in zip(["", *out[:-1]], out, strict=True)]
         if "--resume" not in argv:
+            out += [] if "--steps" in argv else ["--steps", "256"]  # --quick's 4096 steps are a minute
             out += ["--envs", "2", "--n-steps", "128", "--batch-size", "64", "--n-epochs", "1", "--eval-episodes", "1",
                     "--eval-every-steps", "256", "--demo-episodes", "1", "--dagger-rounds", "1", "--dagger-episodes",
                     "1", "--bc-epochs", "1", "--demo-policy", "mpc-cv"]

@@ -1,8 +1,13 @@
 """The training callback of `envs.rl.train`: progress with steps/s and ETA, periodic evaluation with the harness
-metrics, atomic checkpoints, resume, and a stop (keeping the last good checkpoint) when training diverges."""
+metrics, atomic checkpoints, resume, a stop (keeping the last good checkpoint) when training diverges, and the
+state to save when Ctrl-C stops training anywhere (`TrainMonitor.save_interrupted`).
+
+The best agent (checkpoints/best.zip) is chosen among the evaluations made after training steps (`is_new_best`):
+the step-0 evaluation is the baseline, logged in eval.csv but never kept as best."""
 
 from __future__ import annotations
 
+import copy
 import csv
 import importlib.util
 import json
@@ -55,6 +60,23 @@ class ModelPolicy:
         return Decision(action=self._action.copy())
 
 
+def is_new_best(steps: int, success: float, mean_return: float, best: tuple[float, float]) -> bool:
+    """Whether an evaluation replaces best.zip: made after training steps (`steps` > 0; the step-0 agent, untrained
+    or only cloned, is the baseline: on a few episodes it can score by luck), with a finite mean return, and better
+    than `best` = (success, mean return) of the kept one: a higher success rate, ties to the higher return."""
+    return steps > 0 and bool(np.isfinite(mean_return)) and (success, mean_return) > best
+
+
+def select_best(rows: list[tuple[int, float, float]]) -> int | None:
+    """Index of the evaluation that `is_new_best` keeps in a sequence of (steps, success, mean return); None when
+    none is eligible (only the baseline)."""
+    best, index = (-1.0, -float("inf")), None
+    for i, (steps, success, ret) in enumerate(rows):
+        if is_new_best(steps, success, ret, best):
+            best, index = (success, ret), i
+    return index
+
+
 def finite_parameters(model: Any) -> bool:
     import torch
 
@@ -78,7 +100,12 @@ class TrainMonitor(BaseCallback):
         self.next_ckpt = cfg.checkpoint_every_steps
         self.best_success = -1.0
         self.best_return = -float("inf")  # ties in success go to the higher mean return (e.g. the faster agent)
+        self.baseline: tuple[float, float] | None = None  # (success, mean return) of the step-0 evaluation
         self.extra: dict[str, Any] = {}
+        # Ctrl-C: the step count whose weights the model holds (None while a PPO update changes them), and the
+        # weights and optimiser state of the last rollout's start, taken before its update (`save_interrupted`)
+        self.safe_steps: int | None = None
+        self.snapshot: tuple[int, dict, dict] | None = None
 
     # --------------------------------------------------------------------------------------- SB3 hooks
     def _on_training_start(self) -> None:
@@ -92,6 +119,7 @@ class TrainMonitor(BaseCallback):
             raise Diverged(f"training diverged at step {self.model.num_timesteps} (non-finite weights); the last good "
                            f"checkpoint is {self.out / 'checkpoints' / 'latest.zip'}")
         steps = self.model.num_timesteps
+        self.safe_steps = steps  # the rollout about to start does not change the weights
         if steps >= self.next_ckpt:
             self.checkpoint()
             self.next_ckpt = (steps // self.cfg.checkpoint_every_steps + 1) * self.cfg.checkpoint_every_steps
@@ -100,6 +128,10 @@ class TrainMonitor(BaseCallback):
             self.next_eval = (steps // self.cfg.eval_every_steps + 1) * self.cfg.eval_every_steps
 
     def _on_rollout_end(self) -> None:
+        policy = self.model.policy  # the update that follows changes these: keep them as of the rollout's start
+        self.snapshot = (int(self.safe_steps or 0), copy.deepcopy(policy.state_dict()),
+                         copy.deepcopy(policy.optimizer.state_dict()))
+        self.safe_steps = None
         steps, total = self.model.num_timesteps, self.cfg.total_steps
         elapsed = time.perf_counter() - self.t0
         rate = (steps - self.steps0) / max(elapsed, 1e-9)
@@ -136,8 +168,10 @@ class TrainMonitor(BaseCallback):
         print(f"eval @ {row['steps']}: success {row['success']:.2f}  collision {row['collision']:.2f}  "
               f"timeout {row['timeout']:.2f}  return {row['mean_return']:.2f}  ({self.cfg.eval_episodes} episodes, "
               f"seeds {seeds.start}..{seeds.stop - 1})", flush=True)
-        better = (row["success"], row["mean_return"]) > (self.best_success, self.best_return)
-        if better and np.isfinite(row["mean_return"]) and finite_parameters(model):
+        if row["steps"] == 0 and np.isfinite(row["mean_return"]):
+            self.baseline = (float(row["success"]), float(row["mean_return"]))
+        best = (self.best_success, self.best_return)
+        if is_new_best(row["steps"], row["success"], row["mean_return"], best) and finite_parameters(model):
             self.best_success, self.best_return = float(row["success"]), float(row["mean_return"])
             save_agent(model, self.out / "checkpoints" / "best.zip", self.env_config, self._meta(model))
         return row
@@ -163,13 +197,33 @@ class TrainMonitor(BaseCallback):
         return {"steps": int(model.num_timesteps), "wall_s": round(self.wall_s, 1), "train_config": self.cfg.to_json(),
                 DECISION_KEY: self.cfg.decision_every_steps, **self.extra}
 
-    def checkpoint(self) -> None:
-        meta = self._meta(self.model)
-        save_agent(self.model, self.out / "checkpoints" / "latest.zip", self.env_config, meta)
+    def checkpoint(self, model: Any = None) -> None:
+        """checkpoints/latest.zip and state.json: what `--resume` reads (`model`: default the one in training)."""
+        model = model or self.model
+        meta = self._meta(model)
+        save_agent(model, self.out / "checkpoints" / "latest.zip", self.env_config, meta)
         best_return = self.best_return if np.isfinite(self.best_return) else None
         write_json_atomic(self.out / "checkpoints" / "state.json",
                           {**meta, "best_success": self.best_success, "best_return": best_return,
-                           "next_eval": self.next_eval})
+                           "next_eval": self.next_eval, "baseline": self.baseline})
+
+    def save_interrupted(self, model: Any) -> int | None:
+        """After Ctrl-C anywhere in training: save the last consistent state as checkpoints/latest.zip (the weights
+        and optimiser state as of the last rollout's start, with its step count; a rollout cut short is dropped,
+        an update cut short is undone); returns the saved step count, None when there is nothing (yet) to save."""
+        if self.safe_steps is not None:
+            steps = self.safe_steps
+        elif self.snapshot is not None:
+            steps, policy, optimiser = self.snapshot
+            model.policy.load_state_dict(policy)
+            model.policy.optimizer.load_state_dict(optimiser)
+        else:
+            return None
+        if not finite_parameters(model):
+            return None
+        model.num_timesteps = steps
+        self.checkpoint(model)
+        return steps
 
     def finish(self, model: Any) -> None:
         self.model = model
@@ -182,7 +236,11 @@ class TrainMonitor(BaseCallback):
         save_agent(model, self.out / "final.zip", self.env_config, self._meta(model))
         print(f"done: {model.num_timesteps} steps in {_hms(self.wall_s)}; agent {self.out / 'final.zip'}, "
               f"best {self.out / 'checkpoints' / 'best.zip'} (success {self.best_success:.2f}, return "
-              f"{self.best_return:.2f})", flush=True)
+              f"{self.best_return:.2f}; chosen among the evaluations after training steps)", flush=True)
+        if self.baseline is not None and self.baseline > (self.best_success, self.best_return):
+            print(f"note: the step-0 agent (before PPO) scored better (success {self.baseline[0]:.2f}, return "
+                  f"{self.baseline[1]:.2f}) than every trained evaluation; best.zip is the best trained agent, not "
+                  "it", flush=True)
 
 
 def load_checkpoint(model: Any, monitor: TrainMonitor, out: Path) -> None:
@@ -195,6 +253,8 @@ def load_checkpoint(model: Any, monitor: TrainMonitor, out: Path) -> None:
     best_return = state.get("best_return")  # absent in runs saved before it was kept; None before a finite one
     monitor.best_return = -float("inf") if best_return is None else float(best_return)
     monitor.next_eval = int(state["next_eval"])
+    baseline = state.get("baseline")  # absent in runs saved before it was kept
+    monitor.baseline = None if baseline is None else (float(baseline[0]), float(baseline[1]))
     monitor.extra = {k: v for k, v in state.items() if k == "warm_start"}
     monitor.next_ckpt = (model.num_timesteps // monitor.cfg.checkpoint_every_steps + 1) \
         * monitor.cfg.checkpoint_every_steps

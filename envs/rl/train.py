@@ -1,8 +1,9 @@
 """Train a PPO agent on `crowdnav/CrowdNav-v1`: `python -m envs.rl.train` or `crowdnav train`.
 
+    crowdnav train --quick --out out/train/quick               # a check that training runs (minutes, 4,096 steps)
     crowdnav train --scenario circle_crossing --pedestrians 5 --invisible --steps 1000000 --out out/train/cc5
     crowdnav train --config run.toml --warm-start bc          # flags override the file's values
-    crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint
+    crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint (or a Ctrl-C)
     crowdnav train --suite crowdnav-classic --decision-every-steps 5 --warm-start dagger --demo-policy mpc-cv
                                                                # a benchmark cell's env, a decision every 0.25 s
 
@@ -28,12 +29,17 @@ saved agent records k, and the harness's sb3: policy acts at the same period; de
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import functools
 import json
 import os
+import signal
 import sys
+import threading
 import time
 import tomllib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -56,12 +62,21 @@ def make_vec_env(cfg: TrainConfig) -> Any:
 
     mix = cfg.mixture()
     env_cls, env_kwargs = (MixEnv, {"mix": mix}) if mix is not None else (CrowdNavEnv, {"config": cfg.env_config()})
+    if cfg.workers > 1:  # built in each subprocess, which then leaves Ctrl-C to this one (it saves and closes them)
+        env_cls = functools.partial(_env_ignoring_ctrl_c, env_cls)
     vec_cls = DummyVecEnv if cfg.workers == 1 else SubprocVecEnv
     kwargs = {"start_method": "forkserver"} if cfg.workers > 1 else None
     wrapper = {"wrapper_class": DecisionPeriod, "wrapper_kwargs": {"every": cfg.decision_every_steps}} \
         if cfg.decision_every_steps > 1 else {}
     return sb3_make_vec_env(env_cls, n_envs=cfg.envs, seed=TRAIN_SEED_OFFSET + cfg.seed, vec_env_cls=vec_cls,
                             env_kwargs=env_kwargs, vec_env_kwargs=kwargs, **wrapper)
+
+
+def _env_ignoring_ctrl_c(env_cls: Any, **kwargs: Any) -> Any:
+    """`env_cls(**kwargs)` in a SubprocVecEnv worker, which ignores SIGINT from now on: a terminal's Ctrl-C reaches
+    the whole process group, and a worker stopped by it would print a traceback and leave the learner's pipe dead."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return env_cls(**kwargs)
 
 
 def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
@@ -137,10 +152,43 @@ def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None,
     return info
 
 
+class TrainInterrupted(KeyboardInterrupt):
+    """Ctrl-C during `train`; `str()` says in one line what was saved and how to continue. Still a
+    KeyboardInterrupt, so code that stops on Ctrl-C keeps doing so."""
+
+
+@contextlib.contextmanager
+def ctrl_c_ignored() -> Iterator[None]:
+    """While entered (in the main thread): Ctrl-C is ignored, so a second press cannot cut a save short."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def interrupted(monitor: Any, model: Any, cfg: TrainConfig, out: Path) -> TrainInterrupted:
+    """Save what Ctrl-C left (`TrainMonitor.save_interrupted`) and say so in one line."""
+    with ctrl_c_ignored():
+        steps = monitor.save_interrupted(model) if monitor is not None and model is not None else None
+    if steps is not None:
+        return TrainInterrupted(f"interrupted: step {steps} of {cfg.total_steps} saved in "
+                                f"{out / 'checkpoints' / 'latest.zip'}; continue with: crowdnav train --resume {out}")
+    if (out / "checkpoints" / "latest.zip").is_file():
+        return TrainInterrupted(f"interrupted before any new step; continue with: crowdnav train --resume {out}")
+    demos = next((p for p in (out / "dagger.npz", out / "demos.npz") if p.is_file()), None)
+    reuse = f" (add --demos {demos} to reuse the demonstrations)" if demos is not None else ""
+    return TrainInterrupted(f"interrupted before the first checkpoint, nothing to resume in {out}; rerun the "
+                            f"command{reuse}")
+
+
 def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | None = None,
           backend: str = "local", address: str | None = None) -> int:
     """Run (or resume) training into `out`; 0 on completion, 1 when training diverged. `backend`, `address`: where
-    the warm start's expert roll-outs run (`warm_start`)."""
+    the warm start's expert roll-outs run (`warm_start`). Ctrl-C saves the last consistent state (also at step 0,
+    after the warm start and the baseline evaluation) and raises `TrainInterrupted`."""
     from stable_baselines3.common.logger import configure
 
     from envs.rl.monitor import Diverged, TrainMonitor, load_checkpoint, tensorboard_available
@@ -149,6 +197,7 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
     set_threads(cfg.threads)
     out.mkdir(parents=True, exist_ok=True)
     vec_env = make_vec_env(cfg)
+    model = monitor = None
     try:
         model = make_model(cfg, vec_env)
         formats = ["csv", "tensorboard"] if tensorboard_available() else ["csv"]
@@ -158,14 +207,19 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
             load_checkpoint(model, monitor, out)
         else:
             write_json_atomic(out / "config.json", cfg.to_json())
+            (out / "eval.csv").unlink(missing_ok=True)  # a run stopped before its first checkpoint starts again
             if cfg.warm_start != "none":
                 monitor.note_warm_start(warm_start(cfg, model, out, demos_path, backend, address))
-            monitor.evaluate(model)  # the curve starts at step 0 (the cloned or the random policy)
+            monitor.evaluate(model)  # the curve starts at step 0 (the cloned or the random policy): the baseline
+            monitor.checkpoint(model)  # resumable from here on
+        monitor.safe_steps = model.num_timesteps
         remaining = cfg.total_steps - model.num_timesteps
         if remaining > 0:
             model.learn(total_timesteps=remaining, callback=monitor, reset_num_timesteps=False)
         monitor.finish(model)
         return 0
+    except KeyboardInterrupt:
+        raise interrupted(monitor, model, cfg, out) from None
     except Diverged as exc:
         print(f"crowdnav train: {exc}", file=sys.stderr)
         return 1
@@ -338,7 +392,11 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as exc:
         print(f"crowdnav train: error: {exc}", file=sys.stderr)
         return 2
-    return train(cfg, out, resume, args.demos, args.backend, args.address)
+    try:
+        return train(cfg, out, resume, args.demos, args.backend, args.address)
+    except KeyboardInterrupt as exc:
+        print(f"crowdnav train: {str(exc) or 'interrupted'}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

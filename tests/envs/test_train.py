@@ -105,8 +105,10 @@ def test_train_evaluates_checkpoints_resumes_and_refuses_other_layouts(tmp_path)
     assert [int(r["steps"]) for r in rows] == [0, 256, 512]  # eval at start, every 256 steps
     from envs.policies.sb3_files import read_agent
 
-    key = [(float(r["success"]), float(r["mean_return"])) for r in rows]  # best: success, ties to the higher return
-    assert read_agent(out / "checkpoints" / "best.zip")[1]["meta"]["steps"] == int(rows[key.index(max(key))]["steps"])
+    # best: among the trained evaluations (step 0 is the baseline), success, ties to the higher return
+    key = [(float(r["success"]), float(r["mean_return"])) for r in rows[1:]]
+    assert read_agent(out / "checkpoints" / "best.zip")[1]["meta"]["steps"] == \
+        int(rows[1 + key.index(max(key))]["steps"])
     meta = json.loads((out / "config.json").read_text())
     assert TrainConfig.from_json(meta) == TINY
     assert main(["train", "--resume", str(out), "--steps", "768"]) == 0
