@@ -7,13 +7,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from crowdsim import SCENARIOS, GroupConfig, SimConfig
-from envs.crowd_models import DEFAULT_CROWD_MODEL, check_crowd_model
+from envs.crowd_models import DEFAULT_CROWD_MODEL, REPLAY_SCENARIO, check_crowd_model
 from envs.orca_crowd import OrcaCrowdConfig
 from envs.timing import DEFAULT_TIMING
 from planner import RobotConfig
 
 GROUP_SOURCES = ("truth", "predicted")
-REPLAY_SCENARIO = "replay"
 # The predictor mpc-gpgraph uses and the observation's predictions come from, unless one is named: the shipped
 # crowdsim-trained GP-Graph (RESULTS.md, "Default synthetic predictor") grouping people by the coherent-motion rule
 # (predictor.group_rules) instead of its learned assigner, which does not transfer to real people: on the UCY group

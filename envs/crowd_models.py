@@ -4,35 +4,50 @@
     orca          CrowdNav's ORCA humans on a circle, for comparability with the CrowdNav literature
                   (`envs.orca_crowd.OrcaCrowd`; needs the optional package pyrvo)
 
-A replay (scenario "replay") is not a crowd model: the recording is the crowd. `make_crowd` builds either.
+A replay (scenario "replay") is not a crowd model: the recording is the crowd. `make_crowd` builds either from a
+`CrowdSetting` (the env's config is one): the crowds import no env config, which names its crowd by name.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from envs.config import CrowdNavConfig
+    from crowdsim import SimConfig
 
 DEFAULT_CROWD_MODEL = "social-force"
+REPLAY_SCENARIO = "replay"  # the scenario whose crowd is a recording (`envs.replay.ReplayCrowd`)
 ORCA_SCENARIOS = ("circle_crossing",)  # ORCA here knows no walls: the only scenario without walls and flows
 
 
-def _social_force(cfg: CrowdNavConfig) -> Any:
+class CrowdSetting(Protocol):
+    """What `make_crowd` reads of a config (`envs.config.CrowdNavConfig` is one): the scenario, the crowd model's
+    name, the env step dt_s (s), the `envs.replay.ReplayConfig` of scenario "replay" and crowdsim's config stepped at
+    dt_s; crowd model "orca" reads the fields of `envs.orca_crowd.OrcaSetting` too."""
+
+    scenario: str
+    crowd_model: str
+    dt_s: float
+    replay: Any
+
+    def sim_config(self) -> SimConfig: ...
+
+
+def _social_force(cfg: CrowdSetting) -> Any:
     from envs.crowd import SimCrowd
 
     return SimCrowd(cfg.sim_config())
 
 
-def _orca(cfg: CrowdNavConfig) -> Any:
+def _orca(cfg: CrowdSetting) -> Any:
     from envs.orca_crowd import OrcaCrowd
 
     return OrcaCrowd(cfg)
 
 
-CROWD_MODELS: dict[str, Callable[[CrowdNavConfig], Any]] = {"social-force": _social_force, "orca": _orca}
+CROWD_MODELS: dict[str, Callable[[CrowdSetting], Any]] = {"social-force": _social_force, "orca": _orca}
 
 
 def check_crowd_model(name: str, scenario: str) -> None:
@@ -45,10 +60,8 @@ def check_crowd_model(name: str, scenario: str) -> None:
                          f"walls), not {scenario!r}")
 
 
-def make_crowd(cfg: CrowdNavConfig) -> Any:
+def make_crowd(cfg: CrowdSetting) -> Any:
     """The env's `envs.crowd.Crowd` for a config: its crowd model, or a replayed file for scenario 'replay'."""
-    from envs.config import REPLAY_SCENARIO
-
     if cfg.scenario == REPLAY_SCENARIO:
         from envs.replay import ReplayCrowd
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -43,7 +43,7 @@ from envs.crowd import rows_of
 from envs.rvo import OrcaParams, load_pyrvo, orca_velocities, pref_velocity
 
 if TYPE_CHECKING:
-    from envs.config import CrowdNavConfig
+    from planner import RobotConfig
 
 ROBOT_ROUTES = ("fixed", "random")
 START_NOISES = ("centred", "positive")
@@ -119,12 +119,25 @@ class OrcaCrowdConfig:
                           self.safety_space_m, self.time_step_s)
 
 
+class OrcaSetting(Protocol):
+    """What `OrcaCrowd` reads of a config (`envs.config.CrowdNavConfig` is one): `orca`, n_pedestrians, the scenario's
+    name and options (`radius_m`, m), robot_visible, the robot's body (`robot.radius_m`, m) and the env step dt_s, s."""
+
+    orca: OrcaCrowdConfig
+    n_pedestrians: int
+    scenario: str
+    scenario_options: tuple[tuple[str, float], ...]
+    robot_visible: bool
+    robot: RobotConfig
+    dt_s: float
+
+
 class OrcaCrowd:
     """N ORCA humans crossing a circle (module docstring), stepped at the env's dt_s."""
 
     group_labels = True  # the truth: every human walks alone
 
-    def __init__(self, config: CrowdNavConfig) -> None:
+    def __init__(self, config: OrcaSetting) -> None:
         load_pyrvo()  # a missing package fails here, once, before any episode
         self.cfg = config.orca
         self.params = self.cfg.params

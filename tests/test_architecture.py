@@ -106,3 +106,72 @@ def test_the_room_rule_catches_an_upward_import(tmp_path):
     assert {_room(n) for n in _envs_imports(bad)} == {"evaluation"}
     bad.write_text("from envs import rl\n")
     assert {_room(n) for n in _envs_imports(bad)} == {"core", "rl"}
+
+
+def _module_name(path: Path, root: Path) -> str:
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph(root: Path, package: str = "envs") -> dict[str, set[str]]:
+    """Each module of `package` under `root` -> the modules of `package` it imports, lazy imports inside functions
+    and `TYPE_CHECKING` imports included. `from a.b import c` names the module a.b.c where that is a module, else
+    a.b (a package's __init__ where a.b is a package)."""
+    modules = {_module_name(path, root): path for path in sorted((root / package).rglob("*.py"))}
+
+    def resolve(name: str) -> str:  # the deepest module a dotted name reaches; "" for a name outside `package`
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name
+
+    graph = {}
+    for name, path in modules.items():
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets.update(resolve(alias.name) for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets.update(resolve(f"{node.module}.{alias.name}") for alias in node.names)
+        graph[name] = targets - {"", name}
+    return graph
+
+
+def _circle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import circle of `graph` (its modules in import order, the first repeated at the end), or None."""
+    state: dict[str, str] = {}  # "open": on the current path; "done": no circle through it
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = "open"
+        path.append(node)
+        for target in sorted(graph.get(node, ())):
+            if state.get(target) == "open":
+                return [*path[path.index(target):], target]
+            if target not in state and (found := visit(target)):
+                return found
+        state[node] = "done"
+        path.pop()
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (found := visit(node)):
+            return found
+    return None
+
+
+def test_envs_modules_import_one_another_without_a_circle():
+    graph = _import_graph(ROOT)
+    assert {"envs.config", "envs.view"} <= graph["envs.env"]  # the graph sees real imports
+    assert _circle(graph) is None, f"import circle: {' -> '.join(_circle(graph) or ())}"
+
+
+def test_the_circle_check_finds_a_planted_circle_through_a_lazy_import(tmp_path):
+    package = tmp_path / "envs"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "a.py").write_text("from envs.b import B\n")
+    (package / "b.py").write_text("B = 1\n")
+    (package / "c.py").write_text("from envs import a\n")
+    assert _circle(_import_graph(tmp_path)) is None
+    (package / "b.py").write_text("B = 1\n\n\ndef f():\n    from envs.c import x\n")
+    assert _circle(_import_graph(tmp_path)) == ["envs.a", "envs.b", "envs.c", "envs.a"]
