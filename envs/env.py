@@ -27,7 +27,7 @@ from crowdsim import CrowdState
 from envs.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.config import CrowdNavConfig
 from envs.crowd_models import make_crowd
-from envs.frame import SceneFrame
+from envs.drawing.frame import SceneFrame
 from envs.geometry import WallIndex
 from envs.history import TRACK_ROWS, PedHistory
 from envs.kernels import intruded_groups, step_distances
@@ -187,7 +187,7 @@ class CrowdNavEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
-        from envs.render import render_rgb
+        from envs.drawing.render import render_rgb
 
         return render_rgb(self.frame())
 

@@ -35,7 +35,7 @@ def test_core_packages_never_import_each_other(package):
 
 @pytest.mark.parametrize("module, allowed", [
     ("pymunk", {"crowdsim/world.py"}),
-    ("rerun", {"crowdsim/recording.py", "envs/rerun_observer.py"}),
+    ("rerun", {"crowdsim/recording.py", "envs/drawing/rerun_observer.py"}),
     ("torch", RL_MODULES),  # torch inside predictor/, and in envs only where SB3 needs it (the rl extra)
     ("stable_baselines3", {*RL_MODULES, "envs/policies/sb3_files.py", "envs/rl/train.py"}),
     ("casadi", None),  # casadi only inside planner/
@@ -51,14 +51,19 @@ def test_heavy_dependencies_stay_in_their_place(module, allowed):
                 assert ok, f"{rel} imports {module}"
 
 
-# envs/ is four rooms. Each room may import the rooms listed for it (and itself); the core imports no other room.
+# envs/ is seven rooms. Each room may import the rooms listed for it (and itself). The core (the env, its config,
+# observation, rewards and the policy contract) stands on three rooms below it, which import no other room: crowds
+# (the crowd sources behind the `Crowd` protocol), scoring (metrics, collisions, geometry) and drawing (frames,
+# images, rerun). The core imports no room above it; the rooms above it may use the three below.
 # The two entry points of the package (its __init__, which registers the env and re-exports the policy registry,
 # and the `crowdnav` command line) may import every room.
+BELOW_CORE = {"crowds", "scoring", "drawing"}
 ROOMS = {
-    "core": set(),
-    "policies": {"core"},
-    "evaluation": {"core", "policies"},
-    "rl": {"core", "policies", "evaluation"},
+    **{room: set() for room in BELOW_CORE},
+    "core": BELOW_CORE,
+    "policies": {"core", *BELOW_CORE},
+    "evaluation": {"core", "policies", *BELOW_CORE},
+    "rl": {"core", "policies", "evaluation", *BELOW_CORE},
 }
 ENTRY_POINTS = {"envs/__init__.py", "envs/cli.py", "envs/cli_options.py"}
 
@@ -81,7 +86,7 @@ def _envs_imports(path: Path) -> set[str]:
     return names
 
 
-def test_every_envs_module_lives_in_one_of_the_four_rooms():
+def test_every_envs_module_lives_in_one_of_the_rooms():
     for path in _sources("envs"):
         rel = path.relative_to(ROOT / "envs").parts
         assert len(rel) == 1 or rel[0] in ROOMS, f"envs/{'/'.join(rel)} is outside the rooms {sorted(ROOMS)}"
@@ -106,6 +111,17 @@ def test_the_room_rule_catches_an_upward_import(tmp_path):
     assert {_room(n) for n in _envs_imports(bad)} == {"evaluation"}
     bad.write_text("from envs import rl\n")
     assert {_room(n) for n in _envs_imports(bad)} == {"core", "rl"}
+    bad.write_text("from envs.drawing.frame import SceneFrame\n")
+    assert {_room(n) for n in _envs_imports(bad)} == {"drawing"}
+
+
+def test_a_room_below_the_core_may_not_import_it(tmp_path):
+    """Even a type-only import of the core from a room below it breaks the rule (it would make a room circle)."""
+    bad = tmp_path / "metrics.py"
+    bad.write_text("from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    from envs.view import Pedestrians\n")
+    targets = {_room(n) for n in _envs_imports(bad)}
+    assert targets == {"core"}
+    assert not targets <= ROOMS["scoring"] | {"scoring"}
 
 
 def _module_name(path: Path, root: Path) -> str:
