@@ -135,8 +135,8 @@ class CrowdNavConfig:
     start_clearance_m: surface clearance required around the robot's start when choosing a route, m.
     start_lookahead_s: the start must keep that clearance over this time with every pedestrian's current
         velocity held, so that nobody is already walking into the standing robot (0: now only), s.
-    spawn_contact_ends_episode: whether a contact of kind "spawn" (`envs.collisions`: a replayed track that began
-        on the robot or within one prediction step of reaching it, an annotation artefact no planner can avoid)
+    spawn_contact_ends_episode: whether a contact of kind "spawn" (`envs.scoring.collisions`: a replayed track that
+        began on the robot or within one prediction step of reaching it, an annotation artefact no planner can avoid)
         ends the episode as a collision. False: that pedestrian is ignored for contact, discomfort and reward
         until it is clear of the robot, and the contact is counted in the metrics (`spawn_contacts`).
     rewards, observation: see their classes.
