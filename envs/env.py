@@ -25,7 +25,7 @@ from gymnasium import spaces
 
 from crowdsim import CrowdState
 from envs.config import CrowdNavConfig
-from envs.crowd_models import make_crowd
+from envs.crowds.models import make_crowd
 from envs.drawing.frame import SceneFrame
 from envs.history import TRACK_ROWS, PedHistory
 from envs.observation import build_observation, observation_space

@@ -82,10 +82,10 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
     key = (recording, policy, variant, predictor, overlay)
     if key not in _CACHE:
         from envs.config import CrowdNavConfig
+        from envs.crowds.replay import ReplayConfig
         from envs.env import CrowdNavEnv
         from envs.evaluation.suite import load_suite
         from envs.policies import GPGraphPolicy, PlannerPolicy, singleton_prediction
-        from envs.replay import ReplayConfig
         from planner import ConstantVelocityMPC
 
         defaults = load_suite(TUNING_SUITE).cells[0].defaults  # the suites' episode rules (time limit, spawns)

@@ -52,7 +52,8 @@ class EpisodeRecord:
     did not end the episode (`CrowdNavConfig.spawn_contact_ends_episode`). plans/fallbacks: planner calls and
     fallbacks; solve_times_ms: the wall time of every plan that ran the solver (`PlanResult.plan_time_s`, the whole
     `plan()` call; records written before 2026-11-27 hold the solver call, route and shield only, 7-15 ms less).
-    group_intrusion / intrusion_fraction: None where the crowd had no group labels (`envs.crowd.Crowd.group_labels`).
+    group_intrusion / intrusion_fraction: None where the crowd had no group labels
+        (`envs.crowds.crowd.Crowd.group_labels`).
     fingerprint: identifies the settings the episode ran under (suite, cell, policy); records merge only when it agrees.
 
     The social-navigation metrics (`envs.scoring.social_metrics`; None in records written before they existed, in error

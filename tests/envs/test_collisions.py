@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from envs import CrowdNavEnv
-from envs.replay import ReplayConfig
+from envs.crowds.replay import ReplayConfig
 from envs.scoring.collisions import STOPPED_MPS, collision_kind
 from tests.envs.test_env import place_robot
 

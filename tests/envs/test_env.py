@@ -11,7 +11,7 @@ import pytest
 
 import envs
 from envs import CrowdNavConfig, CrowdNavEnv, ObservationConfig
-from envs.replay import ReplayConfig
+from envs.crowds.replay import ReplayConfig
 from planner import step_robot
 
 SMALL = CrowdNavConfig(n_pedestrians=12, time_limit_s=8.0)

@@ -1,8 +1,8 @@
 """The crowd models a `CrowdNavConfig.crowd_model` names: a small explicit registry (name -> builder).
 
-    social-force  crowdsim's pymunk social-force crowd with groups (the default; `envs.crowd.SimCrowd`)
+    social-force  crowdsim's pymunk social-force crowd with groups (the default; `envs.crowds.crowd.SimCrowd`)
     orca          CrowdNav's ORCA humans on a circle, for comparability with the CrowdNav literature
-                  (`envs.orca_crowd.OrcaCrowd`; needs the optional package pyrvo)
+                  (`envs.crowds.orca.OrcaCrowd`; needs the optional package pyrvo)
 
 A replay (scenario "replay") is not a crowd model: the recording is the crowd. `make_crowd` builds either from a
 `CrowdSetting` (the env's config is one): the crowds import no env config, which names its crowd by name.
@@ -18,14 +18,14 @@ if TYPE_CHECKING:
     from crowdsim import SimConfig
 
 DEFAULT_CROWD_MODEL = "social-force"
-REPLAY_SCENARIO = "replay"  # the scenario whose crowd is a recording (`envs.replay.ReplayCrowd`)
+REPLAY_SCENARIO = "replay"  # the scenario whose crowd is a recording (`envs.crowds.replay.ReplayCrowd`)
 ORCA_SCENARIOS = ("circle_crossing",)  # ORCA here knows no walls: the only scenario without walls and flows
 
 
 class CrowdSetting(Protocol):
     """What `make_crowd` reads of a config (`envs.config.CrowdNavConfig` is one): the scenario, the crowd model's
-    name, the env step dt_s (s), the `envs.replay.ReplayConfig` of scenario "replay" and crowdsim's config stepped at
-    dt_s; crowd model "orca" reads the fields of `envs.orca_crowd.OrcaSetting` too."""
+    name, the env step dt_s (s), the `envs.crowds.replay.ReplayConfig` of scenario "replay" and crowdsim's config
+    stepped at dt_s; crowd model "orca" reads the fields of `envs.crowds.orca.OrcaSetting` too."""
 
     scenario: str
     crowd_model: str
@@ -36,13 +36,13 @@ class CrowdSetting(Protocol):
 
 
 def _social_force(cfg: CrowdSetting) -> Any:
-    from envs.crowd import SimCrowd
+    from envs.crowds.crowd import SimCrowd
 
     return SimCrowd(cfg.sim_config())
 
 
 def _orca(cfg: CrowdSetting) -> Any:
-    from envs.orca_crowd import OrcaCrowd
+    from envs.crowds.orca import OrcaCrowd
 
     return OrcaCrowd(cfg)
 
@@ -61,9 +61,9 @@ def check_crowd_model(name: str, scenario: str) -> None:
 
 
 def make_crowd(cfg: CrowdSetting) -> Any:
-    """The env's `envs.crowd.Crowd` for a config: its crowd model, or a replayed file for scenario 'replay'."""
+    """The env's `envs.crowds.crowd.Crowd` for a config: its crowd model, or a replayed file for scenario 'replay'."""
     if cfg.scenario == REPLAY_SCENARIO:
-        from envs.replay import ReplayCrowd
+        from envs.crowds.replay import ReplayCrowd
 
         return ReplayCrowd(replace(cfg.replay, dt_s=cfg.dt_s))
     return CROWD_MODELS[cfg.crowd_model](cfg)
