@@ -92,6 +92,12 @@ def test_every_envs_module_lives_in_one_of_the_rooms():
         assert len(rel) == 1 or rel[0] in ROOMS, f"envs/{'/'.join(rel)} is outside the rooms {sorted(ROOMS)}"
 
 
+def test_the_core_hall_stays_small():
+    """Families of modules live in their rooms; at most 15 modules (its __init__ counted) stay directly in envs/."""
+    hall = sorted(path.name for path in (ROOT / "envs").glob("*.py"))
+    assert "env.py" in hall and len(hall) <= 15, hall
+
+
 def test_rooms_import_only_the_rooms_below_them():
     for path in _sources("envs"):
         rel = path.relative_to(ROOT).as_posix()
