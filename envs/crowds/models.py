@@ -5,7 +5,7 @@
                   (`envs.crowds.orca.OrcaCrowd`; needs the optional package pyrvo)
 
 A replay (scenario "replay") is not a crowd model: the recording is the crowd. `make_crowd` builds either from a
-`CrowdSetting` (the env's config is one): the crowds import no env config, which names its crowd by name.
+`CrowdSetting` (the env's config is one): the crowds import no env config; the config names its crowd model.
 """
 
 from __future__ import annotations
