@@ -4,7 +4,7 @@ numpy's small matrix products go through OpenBLAS, whose x86-64 kernels (with FM
 product from +0.0 with fused multiply-adds: ``A @ v`` gives ``fma(a0, v0, fma(a1, v1, 0))`` per row, and
 ``X @ R.T`` with two or more rows gives ``fma(x1, r1, fma(x0, r0, 0))`` per entry (one row goes the first way).
 Compiled code that must reproduce numpy's numbers bit for bit, so that episodes do not change when a step gets
-faster, uses this (`envs.kernels`; `tests/envs/test_kernels.py` checks the observation against numpy's and skips
+faster, uses this (`envs.scoring.kernels`; `tests/envs/test_kernels.py` checks the observation against numpy's and skips
 on a machine whose BLAS rounds otherwise).
 """
 

@@ -149,7 +149,7 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
             raise UsageError("--scenario replay needs --replay-file PATH")
         if args.pedestrians is not None or args.invisible:
             raise UsageError("--pedestrians and --invisible do not apply to --scenario replay (recorded people)")
-        from envs.replay import ReplayConfig
+        from envs.crowds.replay import ReplayConfig
 
         if args.group_overlaps is not None and args.groups_file is None:
             raise UsageError("--group-overlaps needs --groups-file")
@@ -170,13 +170,13 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
     if args.crowd_model is not None:
         kw["crowd_model"] = args.crowd_model
         if args.crowd_model == "orca":
-            kw["dt_s"] = 0.05  # divides both ORCA's 0.25 s step and the predictor's 0.4 s (envs.orca_crowd)
+            kw["dt_s"] = 0.05  # divides both ORCA's 0.25 s step and the predictor's 0.4 s (envs.crowds.orca)
     if args.wall_rays is not None:
         from envs.config import ObservationConfig
 
         kw["observation"] = ObservationConfig(wall_rays=args.wall_rays)
     config = CrowdNavConfig(**kw)
-    from envs.crowd_models import DEFAULT_CROWD_MODEL, make_crowd
+    from envs.crowds.models import DEFAULT_CROWD_MODEL, make_crowd
 
     if not replay:
         config.sim_config()  # validates the crowd settings before any worker starts
@@ -186,10 +186,10 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
 
 
 def _frame_step_warning(args: argparse.Namespace) -> str | None:
-    """A warning when --frame-step contradicts a known recording's annotation step (`envs.replay`)."""
+    """A warning when --frame-step contradicts a known recording's annotation step (`envs.crowds.replay`)."""
     if args.frame_step is None:
         return None
-    from envs.replay import known_frame_step
+    from envs.crowds.replay import known_frame_step
 
     known = known_frame_step(args.replay_file)
     if known is None or abs(args.frame_step - known) <= 0.01 * known:
@@ -202,7 +202,7 @@ def _group_notes(config: CrowdNavConfig) -> tuple[str, ...]:
     """The merges of overlapping groups in a replay's group file (`--group-overlaps merge`), one line each."""
     if config.replay is None or config.replay.groups_path is None or config.replay.group_overlaps != "merge":
         return ()
-    from envs.crowd_models import make_crowd
+    from envs.crowds.models import make_crowd
 
     return make_crowd(config).group_notes
 

@@ -7,13 +7,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from crowdsim import SCENARIOS, GroupConfig, SimConfig
-from envs.crowd_models import DEFAULT_CROWD_MODEL, check_crowd_model
-from envs.orca_crowd import OrcaCrowdConfig
+from envs.crowds.models import DEFAULT_CROWD_MODEL, REPLAY_SCENARIO, check_crowd_model
+from envs.crowds.orca import OrcaCrowdConfig
 from envs.timing import DEFAULT_TIMING
 from planner import RobotConfig
 
 GROUP_SOURCES = ("truth", "predicted")
-REPLAY_SCENARIO = "replay"
 # The predictor mpc-gpgraph uses and the observation's predictions come from, unless one is named: the shipped
 # crowdsim-trained GP-Graph (RESULTS.md, "Default synthetic predictor") grouping people by the coherent-motion rule
 # (predictor.group_rules) instead of its learned assigner, which does not transfer to real people: on the UCY group
@@ -136,15 +135,15 @@ class CrowdNavConfig:
     start_clearance_m: surface clearance required around the robot's start when choosing a route, m.
     start_lookahead_s: the start must keep that clearance over this time with every pedestrian's current
         velocity held, so that nobody is already walking into the standing robot (0: now only), s.
-    spawn_contact_ends_episode: whether a contact of kind "spawn" (`envs.collisions`: a replayed track that began
-        on the robot or within one prediction step of reaching it, an annotation artefact no planner can avoid)
+    spawn_contact_ends_episode: whether a contact of kind "spawn" (`envs.scoring.collisions`: a replayed track that
+        began on the robot or within one prediction step of reaching it, an annotation artefact no planner can avoid)
         ends the episode as a collision. False: that pedestrian is ignored for contact, discomfort and reward
         until it is clear of the robot, and the contact is counted in the metrics (`spawn_contacts`).
     rewards, observation: see their classes.
-    replay: an `envs.replay.ReplayConfig` for scenario "replay".
-    crowd_model: who the simulated pedestrians are (`envs.crowd_models.CROWD_MODELS`): "social-force" (crowdsim, the
+    replay: an `envs.crowds.replay.ReplayConfig` for scenario "replay".
+    crowd_model: who the simulated pedestrians are (`envs.crowds.models.CROWD_MODELS`): "social-force" (crowdsim, the
         default) or "orca" (CrowdNav's ORCA humans, scenario circle_crossing only, for comparability).
-    orca: the ORCA humans' settings (`envs.orca_crowd.OrcaCrowdConfig`), read by crowd model "orca" only.
+    orca: the ORCA humans' settings (`envs.crowds.orca.OrcaCrowdConfig`), read by crowd model "orca" only.
     """
 
     scenario: str = "plaza"
@@ -178,7 +177,7 @@ class CrowdNavConfig:
         if self.scenario != REPLAY_SCENARIO or self.crowd_model != DEFAULT_CROWD_MODEL:
             check_crowd_model(self.crowd_model, self.scenario)
         if not isinstance(self.orca, OrcaCrowdConfig):
-            raise TypeError(f"CrowdNavConfig.orca must be envs.orca_crowd.OrcaCrowdConfig, got {type(self.orca)}")
+            raise TypeError(f"CrowdNavConfig.orca must be envs.crowds.orca.OrcaCrowdConfig, got {type(self.orca)}")
         if not isinstance(self.robot, RobotConfig):
             raise TypeError(f"CrowdNavConfig.robot must be planner.RobotConfig (the robot's kinematic limits), got "
                             f"{type(self.robot).__module__}.{type(self.robot).__name__}; crowdsim.RobotSlot "

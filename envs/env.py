@@ -24,17 +24,17 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim import CrowdState
-from envs.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.config import CrowdNavConfig
-from envs.crowd_models import make_crowd
-from envs.frame import SceneFrame
-from envs.geometry import WallIndex
+from envs.crowds.models import make_crowd
+from envs.drawing.frame import SceneFrame
 from envs.history import TRACK_ROWS, PedHistory
-from envs.kernels import intruded_groups, step_distances
-from envs.metrics import EpisodeMetrics, social_step
 from envs.observation import build_observation, observation_space
 from envs.prediction import load_predictor_spec, predict
 from envs.rewards import StepFacts, reward_terms, weighted
+from envs.scoring.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
+from envs.scoring.geometry import WallIndex
+from envs.scoring.kernels import intruded_groups, step_distances
+from envs.scoring.metrics import EpisodeMetrics, social_step
 from envs.timing import DEFAULT_TIMING
 from envs.view import Decision, Pedestrians, PolicyView, action_command
 from planner import clip_control, model_dims, step_robot
@@ -187,7 +187,7 @@ class CrowdNavEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
-        from envs.render import render_rgb
+        from envs.drawing.render import render_rgb
 
         return render_rgb(self.frame())
 
@@ -410,8 +410,8 @@ class CrowdNavEnv(gym.Env):
                          intruding, social)
 
     def _is_new(self, row: int) -> bool:
-        """Whether the pedestrian in state row `row` is new (`envs.collisions`): its slot held nobody or somebody
-        else at the step's start, or (replays) its track began less than SPAWN_WINDOW_S ago."""
+        """Whether the pedestrian in state row `row` is new (`envs.scoring.collisions`): its slot held nobody or
+        somebody else at the step's start, or (replays) its track began less than SPAWN_WINDOW_S ago."""
         before, s = self._step_start[1], self._state
         if not (before.active[row] and before.ped_id[row] == s.ped_id[row]):
             return True
@@ -419,7 +419,7 @@ class CrowdNavEnv(gym.Env):
         return track_age_s is not None and track_age_s(int(s.ped_id[row])) < SPAWN_WINDOW_S - 1e-9
 
     def _collision_kind(self) -> str:
-        """The kind of this step's pedestrian contact (`envs.collisions`): the pedestrian nearest along the step
+        """The kind of this step's pedestrian contact (`envs.scoring.collisions`): the pedestrian nearest along the step
         (`_facts`)."""
         before_pos = self._step_start[0]
         s, here, row = self._state, self.robot_state[:2], self._nearest_row

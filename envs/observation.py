@@ -38,8 +38,8 @@ import numpy as np
 from gymnasium import spaces
 
 from envs.config import CrowdNavConfig
-from envs.geometry import ray_distances
-from envs.kernels import observation_arrays
+from envs.scoring.geometry import ray_distances
+from envs.scoring.kernels import observation_arrays
 from envs.timing import DEFAULT_TIMING
 
 PRED_LEN = DEFAULT_TIMING.pred_len

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from envs.config import CrowdNavConfig
-from envs.metrics import SocialStep
+from envs.scoring.metrics import SocialStep
 
 TERMS = ("progress", "success", "collision", "discomfort", "group_intrusion", "time")
 
@@ -29,7 +29,7 @@ class StepFacts:
     hit_wall: bool
     min_surface_distance_m: float  # to the nearest pedestrian (inf with nobody around)
     intruding: bool
-    social: SocialStep | None = None  # the metrics' social facts (`envs.metrics.social_step`); no reward uses them
+    social: SocialStep | None = None  # the metrics' social facts (`envs.scoring.metrics.social_step`); no reward reads
 
     @property
     def collided(self) -> bool:

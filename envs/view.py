@@ -43,8 +43,8 @@ class PolicyView:
     walls: (W, 4) wall segments x0, y0, x1, y1. timing: the prediction timing. dt_s: the env step, s.
     future: privileged, for reference policies only (`reads_future = True`, e.g. `mpc-oracle`): where the
         pedestrians will be, (T, N, 2) m at +step_s ... +T step_s (rows of `pedestrians`), T = pred_len or more for
-        a reference that plans farther (its `future_s`), NaN where one will have left (`envs.crowd.Crowd.future`);
-        None for every other policy.
+        a reference that plans farther (its `future_s`), NaN where one will have left
+        (`envs.crowds.crowd.Crowd.future`); None for every other policy.
     track: (48, N, 2) their longer past on the history's grid, NaN before each was first seen (`CrowdNavEnv.
         track_window`), for a policy that declares `reads_track = True` (one whose predictor groups by a rule:
         the rule reads the track); None otherwise.

@@ -17,7 +17,7 @@ import argparse
 
 import numpy as np
 
-from envs.rvo import OrcaParams, orca_velocities, pref_velocity
+from envs.crowds.rvo import OrcaParams, orca_velocities, pref_velocity
 
 R, V, GAP, CIRCLE, DT = 0.3, 1.0, 0.2, 4.0, 0.25
 
@@ -77,9 +77,9 @@ def episode(seed: int, n: int, env_rules: bool) -> tuple[str, float]:
 
 def through_env(cases: int, n: int) -> list[tuple[str, float]]:
     """The cases run by the env; prints how many outcomes differ from CrowdNav's loop under the env's rules."""
+    from envs.crowds.orca import OrcaCrowd
     from envs.env import CrowdNavEnv
     from envs.evaluation.suite import load_suite
-    from envs.orca_crowd import OrcaCrowd
     from envs.policies import decide, make_policy
 
     now = {"case": 0}

@@ -1,6 +1,6 @@
 """Can any robot get through a door cell? The robot's direction forced, the door's options changed, any policy.
 
-A door cell's robot goes in or out at random (`envs.crowd.door_route`); this runs a crowdnav-tune door cell's
+A door cell's robot goes in or out at random (`envs.crowds.crowd.door_route`); this runs a crowdnav-tune door cell's
 episodes with the direction fixed ("in": against the evacuating crowd, "out": with it) and the scenario's options
 replaced (e.g. '{"door_m": 2.0, "continuous": 0}'), and prints the outcomes (collisions with who was at fault). With
 `--policy mpc-oracle` it says what the planner's formulation can do with a perfect prediction. `--occupancy` instead

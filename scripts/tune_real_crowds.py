@@ -1,11 +1,11 @@
 """Tune the crowd MPC among real (replayed ETH/UCY) pedestrians on recordings disjoint from the reported ones.
 
 Runs N episodes per recording for each (policy, MPC variant) on the same seeds, in at most 2 worker processes,
-and prints one row per (recording, policy, variant): success / collision (of which kind "spawn", `envs.collisions`)
-/ timeout rates and plan-time p50/p95 (ms, every solver call). Episodes follow the suites' rules (the defaults of
-`crowdnav-tune`, equal to crowdnav-v1's: 40 s, a spawn contact does not end the episode), and each
-collision line names its kind (robot / pedestrian). For the paired, suite-based check on the tuning suite see
-`crowdnav benchmark --suite crowdnav-tune` and `scripts/compare_runs.py`.
+and prints one row per (recording, policy, variant): success / collision (of which kind "spawn",
+`envs.scoring.collisions`) / timeout rates and plan-time p50/p95 (ms, every solver call). Episodes follow the
+suites' rules (the defaults of `crowdnav-tune`, equal to crowdnav-v1's: 40 s, a spawn contact does not end the
+episode), and each collision line names its kind (robot / pedestrian). For the paired, suite-based check on the
+tuning suite see `crowdnav benchmark --suite crowdnav-tune` and `scripts/compare_runs.py`.
 
 A variant is ``NAME`` or ``NAME:field=value,field=value`` where the fields are `MPCConfig` fields applied on top
 of the base settings (``--base env``: the env's `ENV_MPC`; ``--base crowd``: `planner.CROWD_MPC`), e.g.
@@ -82,10 +82,10 @@ def _env_and_policy(recording: str, policy: str, variant: str, overrides: dict, 
     key = (recording, policy, variant, predictor, overlay)
     if key not in _CACHE:
         from envs.config import CrowdNavConfig
+        from envs.crowds.replay import ReplayConfig
         from envs.env import CrowdNavEnv
         from envs.evaluation.suite import load_suite
         from envs.policies import GPGraphPolicy, PlannerPolicy, singleton_prediction
-        from envs.replay import ReplayConfig
         from planner import ConstantVelocityMPC
 
         defaults = load_suite(TUNING_SUITE).cells[0].defaults  # the suites' episode rules (time limit, spawns)

@@ -6,7 +6,8 @@
 - constant-velocity extrapolation: owner `planner.constant_velocity_prediction`; twin: the mean of predictor's
   `ConstantVelocityPredictor`.
 - point-to-segment projection: owner `planner.segment_projection`; twins: `crowdsim.forces.closest_points_on_segments`,
-  and the env's scalar (`envs.geometry._segment_distance`) and compiled (`envs.kernels`) hull-test copies.
+  and the env's scalar (`envs.scoring.geometry._segment_distance`) and compiled (`envs.scoring.kernels`) hull-test
+  copies.
 - without twins: the default predictor name (`envs.config.DEFAULT_PREDICTOR`), the robot's body and limits
   (`planner.RobotConfig`; crowdsim's robot slot is `RobotSlot`), the planner names (`planner.PLANNERS`, which the
   env's policies use).
@@ -24,7 +25,7 @@ import pytest
 from crowdsim import SimConfig
 from crowdsim.files import write_atomic as crowdsim_write_atomic
 from crowdsim.forces import closest_points_on_segments
-from envs.geometry import _segment_distance
+from envs.scoring.geometry import _segment_distance
 from envs.timing import DEFAULT_TIMING
 from planner import constant_velocity_prediction, point_segment_distances, segment_projection
 from predictor.ethucy import OBS_LEN, PRED_LEN, STEP_S

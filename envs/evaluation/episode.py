@@ -160,7 +160,7 @@ class _Runner:
     def run(self, task: EpisodeTask) -> dict[str, Any]:
         try:
             if task.rrd_path is not None:
-                from envs.rerun_observer import RerunObserver
+                from envs.drawing.rerun_observer import RerunObserver
 
                 with RerunObserver(task.rrd_path) as observer:
                     result = run_episode(task.env, task.policy, task.seed, task.keep_scene, observer, self.env,

@@ -36,9 +36,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from envs.collisions import SPAWN_WINDOW_S
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.env import CrowdNavEnv
+from envs.scoring.collisions import SPAWN_WINDOW_S
 from planner import point_segment_distances
 from planner.spacetime import trace_back
 

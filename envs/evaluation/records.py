@@ -18,13 +18,14 @@ from typing import Any
 from envs.atomic import append_line
 
 OUTCOMES = ("success", "collision", "timeout", "error")
-# Who is at fault for a collision (`envs.collisions`): "robot", it moved into a pedestrian or wall; "pedestrian",
-# who walked into a stopped or retreating robot; "spawn", a replayed track began within contact distance of the robot.
+# Who is at fault for a collision (`envs.scoring.collisions`): "robot", it moved into a pedestrian or wall;
+# "pedestrian", who walked into a stopped or retreating robot; "spawn", a replayed track began within contact
+# distance of the robot.
 AT_FAULT = ("robot", "pedestrian", "spawn")
 AVOIDABLE_AT_FAULT = ("robot", "pedestrian")
 # Record fields renamed since records were first written: old name -> new name (old files still load).
 RENAMED_FIELDS = {"collision_kind": "at_fault"}
-# The float-valued social-navigation fields (`envs.social_metrics`); with group_collision, collision_course and
+# The float-valued social-navigation fields (`envs.scoring.social_metrics`); with group_collision, collision_course and
 # itr_states, every field a record written before them lacks (they load as None: "n/a").
 SOCIAL_FLOAT_FIELDS = ("time_intimate_s", "intimate_fraction", "time_personal_s", "personal_fraction",
                        "time_social_s", "social_fraction", "path_irregularity_rad", "jerk_mps3", "min_ttc_s", "spl",
@@ -51,10 +52,11 @@ class EpisodeRecord:
     did not end the episode (`CrowdNavConfig.spawn_contact_ends_episode`). plans/fallbacks: planner calls and
     fallbacks; solve_times_ms: the wall time of every plan that ran the solver (`PlanResult.plan_time_s`, the whole
     `plan()` call; records written before 2026-11-27 hold the solver call, route and shield only, 7-15 ms less).
-    group_intrusion / intrusion_fraction: None where the crowd had no group labels (`envs.crowd.Crowd.group_labels`).
+    group_intrusion / intrusion_fraction: None where the crowd had no group labels
+        (`envs.crowds.crowd.Crowd.group_labels`).
     fingerprint: identifies the settings the episode ran under (suite, cell, policy); records merge only when it agrees.
 
-    The social-navigation metrics (`envs.social_metrics`; None in records written before they existed, in error
+    The social-navigation metrics (`envs.scoring.social_metrics`; None in records written before they existed, in error
     records, and where a metric is undefined): time_<intimate|personal|social>_s / <zone>_fraction, time (s) and
     fraction of the episode's steps with the nearest person in that Hall zone; group_collision, contact with a
     member of a group of >= 2 (None also without group labels); path_irregularity_rad; jerk_mps3 (m/s^3);

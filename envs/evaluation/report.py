@@ -14,7 +14,7 @@ import numpy as np
 
 from envs.atomic import write_atomic
 from envs.config import REPLAY_SCENARIO
-from envs.social_metrics import ZONES
+from envs.scoring.social_metrics import ZONES
 
 N_DRAWN = 3  # episodes drawn in the trajectories panel of the PNG
 RATE_KEYS = ("success_rate", "collision_rate", "timeout_rate", "group_intrusion_rate")

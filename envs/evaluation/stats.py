@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from envs.evaluation.records import AT_FAULT, EpisodeRecord, finite_or_none
-from envs.social_metrics import ZONES
+from envs.scoring.social_metrics import ZONES
 
 Z95 = 1.959963984540054  # two-sided 95% normal quantile
 ALPHA = 0.05
@@ -134,7 +134,7 @@ def aggregate(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
 
 
 def social_summary(done: Sequence[EpisodeRecord]) -> dict[str, Any]:
-    """The social-navigation metrics of completed episodes (`envs.social_metrics`), each over the episodes that
+    """The social-navigation metrics of completed episodes (`envs.scoring.social_metrics`), each over the episodes that
     measured it (records written before these metrics hold None and are left out; None when none measured):
     mean seconds and mean fraction of episode time per Hall zone; `group_collision_rate` with its Wilson interval
     over episodes with group labels (`group_collision_measured` of them); mean path irregularity (rad) and jerk

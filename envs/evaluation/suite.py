@@ -5,14 +5,14 @@ A cell is either simulated ({"name", "scenario", "n_pedestrians", "robot_visible
 "seed0"}) or a real-crowd replay ({"name", "replay": [files relative to the data folder], "frame_step_s",
 "episodes", "seed0", "groups"?, "group_overlaps"?}). `groups` maps a replayed file to its group file (both
 relative to the data folder, e.g. "../eth_ucy_groups/students003.groups.txt"); `group_overlaps` says what a
-pedestrian listed in two groups does ("merge", or the default "error"; `envs.replay.ReplayConfig`). A recording
+pedestrian listed in two groups does ("merge", or the default "error"; `envs.crowds.replay.ReplayConfig`). A recording
 without a group file has no group labels: its group intrusion is "n/a". Any cell may name its `scene` (default:
 "synthetic" for simulated cells) and the `predictor` that `mpc-gpgraph` uses there when none is given (real cells:
 the scene's leave-one-out ETH/UCY checkpoint, trained without that scene). Episode i of a cell has seed seed0 + i;
 a replay cell with several files replays file (seed mod number of files) from a start time drawn from the seed.
 `defaults` are `CrowdNavConfig` fields (time limit, ...) applied to every cell. Every policy meets exactly the same
 episodes. A simulated cell may also name its `crowd_model` ("social-force", the default, or "orca":
-`envs.crowd_models`), the ORCA humans' settings `orca` (`envs.orca_crowd.OrcaCrowdConfig` fields) and the robot's
+`envs.crowds.models`), the ORCA humans' settings `orca` (`envs.crowds.orca.OrcaCrowdConfig` fields) and the robot's
 `robot` (`planner.RobotConfig` fields; default the env's unicycle) and `observation` (`envs.config.ObservationConfig`
 fields, e.g. CrowdNav++'s 5 m sensor); unknown names or fields raise naming the valid ones.
 A suite may set `planner` defaults for the planner policies run in it: {"replan_every_steps": k, "mpc": {MPCConfig
@@ -30,7 +30,7 @@ from typing import Any
 
 from crowdsim import GroupConfig
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig, ObservationConfig
-from envs.orca_crowd import OrcaCrowdConfig
+from envs.crowds.orca import OrcaCrowdConfig
 from planner import CROWD_MPC, MPCConfig, RobotConfig
 from predictor.ethucy import DEFAULT_DATA_DIR
 
@@ -87,7 +87,7 @@ class Cell:
         """The env config of this cell's episode `seed` (for replay: the file it replays)."""
         kw: dict[str, Any] = dict(self.defaults)
         if self.is_real:
-            from envs.replay import ReplayConfig
+            from envs.crowds.replay import ReplayConfig
 
             files = self.files(data)
             limit = float(kw.get("time_limit_s", CrowdNavConfig.time_limit_s))

@@ -16,13 +16,13 @@ import math
 
 import numpy as np
 
-from envs.rvo import load_pyrvo, orca_velocities, pref_velocity
+from envs.crowds.rvo import load_pyrvo, orca_velocities, pref_velocity
 from envs.view import Decision, PolicyView
 from planner import PlanStats
 
 
 class OrcaPolicy:
-    """See the module docstring. `params`: the env's `OrcaCrowdConfig` ORCA settings (`envs.rvo.OrcaParams`)."""
+    """See the module docstring. `params`: the env's `OrcaCrowdConfig` ORCA settings (`envs.crowds.rvo.OrcaParams`)."""
 
     name = "orca"
     reads_history = False

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
+from envs.crowds.replay import ReplayConfig
 from envs.evaluation.episode import run_episode
 from envs.history import PedHistory
-from envs.replay import ReplayConfig
 
 
 def _overtaking_walker(tmp_path: Path, x0: float, y0: float) -> tuple[CrowdNavConfig, CrowdNavEnv]:

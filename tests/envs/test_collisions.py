@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from envs import CrowdNavEnv
-from envs.collisions import STOPPED_MPS, collision_kind
-from envs.replay import ReplayConfig
+from envs.crowds.replay import ReplayConfig
+from envs.scoring.collisions import STOPPED_MPS, collision_kind
 from tests.envs.test_env import place_robot
 
 

@@ -11,7 +11,7 @@ import pytest
 
 import envs
 from envs import CrowdNavConfig, CrowdNavEnv, ObservationConfig
-from envs.replay import ReplayConfig
+from envs.crowds.replay import ReplayConfig
 from planner import step_robot
 
 SMALL = CrowdNavConfig(n_pedestrians=12, time_limit_s=8.0)
@@ -183,7 +183,7 @@ def test_collision_terminates_along_the_step(tmp_path):
     m = infos[-1]["episode_metrics"]
     assert m["collision"] and not m["success"] and infos[-1]["is_success"] is False
     assert m["collision_with"] == "pedestrian"
-    assert m["at_fault"] == "robot"  # the robot drove into a standing person (envs.collisions)
+    assert m["at_fault"] == "robot"  # the robot drove into a standing person (envs.scoring.collisions)
     assert m["collision_time_s"] == pytest.approx(m["time_s"]) and m["collision_time_s"] > 1.0
     assert infos[-1]["reward_terms"]["collision"] == SMALL.rewards.collision
     # it stopped at first contact: centre distance near robot + pedestrian radius (0.3 + 0.25)

@@ -10,7 +10,7 @@ from crowdsim.groups import dense_rank, gaze_subgroups
 from crowdsim.kernels import _gaze_subgroups
 from crowdsim.kernels import gaze_subgroups as fast_gaze_subgroups
 from crowdsim.state import Slots
-from envs.geometry import (
+from envs.scoring.geometry import (
     WallIndex,
     convex_hull,
     distance_to_hull,

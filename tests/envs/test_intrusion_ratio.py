@@ -13,8 +13,8 @@ import pytest
 from envs.evaluation.records import EpisodeRecord, RecordStore, read_records
 from envs.evaluation.report import compare, markdown_table
 from envs.evaluation.stats import aggregate
-from envs.metrics import EpisodeMetrics, SocialStep
-from envs.social_metrics import ITR_OFFSETS_S, future_intrusions
+from envs.scoring.metrics import EpisodeMetrics, SocialStep
+from envs.scoring.social_metrics import ITR_OFFSETS_S, future_intrusions
 from envs.view import Pedestrians
 
 R = 0.3  # robot and person radius, m: contact (and intrusion) below a centre distance of 0.6 m

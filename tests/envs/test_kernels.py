@@ -1,4 +1,4 @@
-"""The env's compiled per-step paths (`envs.kernels`) give the numpy code's numbers bit for bit.
+"""The env's compiled per-step paths (`envs.scoring.kernels`) give the numpy code's numbers bit for bit.
 
 Episodes must not change when a step gets faster, so each kernel is compared with the straightforward numpy
 code it replaces (kept here as the reference) on random inputs, edge cases included (ties, zeros, pedestrians
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from envs.config import CrowdNavConfig
-from envs.geometry import intruded_groups, swept_distances
-from envs.kernels import _intruded, step_distances
-from envs.kernels import intruded_groups as fast_intruded_groups
 from envs.observation import build_observation, observation_space, rotation
+from envs.scoring.geometry import intruded_groups, swept_distances
+from envs.scoring.kernels import _intruded, step_distances
+from envs.scoring.kernels import intruded_groups as fast_intruded_groups
 from planner import RobotConfig
 
 
@@ -25,7 +25,7 @@ def _fma(a: float, b: float, c: float) -> float:
 
 
 def _blas_rounds_with_fma() -> bool:
-    """Whether numpy's small products here round as `envs.kernels` assumes (OpenBLAS on x86-64 with FMA)."""
+    """Whether numpy's small products here round as `envs.scoring.kernels` assumes (OpenBLAS on x86-64 with FMA)."""
     rng = np.random.default_rng(0)
     for _ in range(50):
         p, r = rng.normal(0, 5, (3, 2)), rotation(float(rng.uniform(-3, 3)))
@@ -136,10 +136,10 @@ def test_intrusion_kernel_finds_the_same_groups() -> None:
 
 
 def test_min_time_to_collision_matches_the_numpy_metric_bit_for_bit() -> None:
-    """The env's per-step time to collision is the minimum of `envs.social_metrics.time_to_collision` over the present
-    rows, to the last bit: in contact, receding, approaching, absent rows (NaN positions) and nobody present."""
-    from envs.kernels import min_time_to_collision
-    from envs.social_metrics import time_to_collision
+    """The env's per-step time to collision is the minimum of `envs.scoring.social_metrics.time_to_collision` over the
+    present rows, to the last bit: in contact, receding, approaching, absent rows (NaN positions) and nobody present."""
+    from envs.scoring.kernels import min_time_to_collision
+    from envs.scoring.social_metrics import time_to_collision
 
     rng = np.random.default_rng(3)
     for trial in range(300):

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
-from envs.crowd import rows_of
+from envs.crowds.crowd import rows_of
+from envs.crowds.replay import ReplayConfig
 from envs.policies import POLICIES, act, make_policy
-from envs.replay import ReplayConfig
 from planner import RobotConfig
 
 ACTION = np.array([0.4, 0.1], np.float32)

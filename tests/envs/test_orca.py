@@ -1,4 +1,4 @@
-"""CrowdNav's ORCA crowd (`envs.orca_crowd`), the `orca` policy and the suites crowdnav-classic / crowdnav-plusplus."""
+"""CrowdNav's ORCA crowd (`envs.crowds.orca`), the `orca` policy and the suites crowdnav-classic / crowdnav-plusplus."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
 from envs.cli import main
-from envs.crowd import rows_of
+from envs.crowds.crowd import rows_of
+from envs.crowds.orca import OrcaCrowd, OrcaCrowdConfig
+from envs.crowds.rvo import OrcaParams, load_pyrvo, orca_velocities, pref_velocity
 from envs.evaluation.suite import load_suite, parse_suite
-from envs.orca_crowd import OrcaCrowd, OrcaCrowdConfig
 from envs.policies import ENV_MPC, PolicyConfig, decide, make_policy
-from envs.rvo import OrcaParams, load_pyrvo, orca_velocities, pref_velocity
 from planner import RobotConfig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,7 +52,7 @@ def test_only_envs_rvo_imports_pyrvo():
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else []
             if any(n.split(".")[0] == "pyrvo" for n in names):
                 importers.append(path.relative_to(ROOT).as_posix())
-    assert sorted(set(importers)) == ["envs/rvo.py"]
+    assert sorted(set(importers)) == ["envs/crowds/rvo.py"]
 
 
 def test_circle_crossing_places_humans_as_crowdnav_does():

@@ -1,4 +1,4 @@
-"""CrowdNav++'s livelier ORCA humans (`envs.orca_crowd`: random radii and speeds, goal changes, new humans on
+"""CrowdNav++'s livelier ORCA humans (`envs.crowds.orca`: random radii and speeds, goal changes, new humans on
 arrival) and the robot's sensor range (`ObservationConfig.sensor_gap_m`), as suite crowdnav-plusplus v2 uses them."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 
 from envs import CrowdNavConfig, CrowdNavEnv
 from envs.config import ObservationConfig
-from envs.crowd import rows_of
+from envs.crowds.crowd import rows_of
+from envs.crowds.orca import RADIUS_RANGE_M, V_PREF_RANGE_MPS, OrcaCrowd, OrcaCrowdConfig
 from envs.evaluation.suite import load_suite
-from envs.orca_crowd import RADIUS_RANGE_M, V_PREF_RANGE_MPS, OrcaCrowd, OrcaCrowdConfig
 from envs.policies import decide, make_policy
 from planner import RobotConfig
 

@@ -66,7 +66,7 @@ def test_same_seed_same_episode_for_the_mpc():
 def _awkward_scene(tmp_path):
     """Nobody for the first 4 s, then one pedestrian seen for a single annotation frame, one walking past the
     route and leaving mid-plan, and one crossing late (0.4 s frames, ETH/UCY format)."""
-    from envs.replay import ReplayConfig
+    from envs.crowds.replay import ReplayConfig
 
     rows = [(10 * 10, 1, 2.0, 0.6)]  # seen once, at t = 4 s, near the robot's line
     rows += [(10 * t, 2, 1.0 + 0.3 * (t - 12), 1.5) for t in range(12, 22)]  # leaves after 8.4 s

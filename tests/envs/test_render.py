@@ -1,4 +1,4 @@
-"""`envs.render`: what the numpy renderer draws, and where."""
+"""`envs.drawing.render`: what the numpy renderer draws, and where."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from crowdsim.recording import palette
-from envs.frame import SceneFrame
-from envs.render import (
+from envs.drawing.frame import SceneFrame
+from envs.drawing.render import (
     BACKGROUND,
     GOAL,
     HEADING,

@@ -11,7 +11,7 @@ import pytest
 
 from crowdsim.config import SimConfig
 from crowdsim.generate import RunSpec, generate
-from envs.replay import ReplayConfig, ReplayCrowd, assign_slots, infer_frame_increment
+from envs.crowds.replay import ReplayConfig, ReplayCrowd, assign_slots, infer_frame_increment
 from predictor.ethucy import DEFAULT_DATA_DIR, read_groups
 
 ETH_UCY = DEFAULT_DATA_DIR.absolute()  # resolved before any test changes the working folder
@@ -269,7 +269,7 @@ def test_replays_a_benchmark_file():
 
 # ------------------------------------------------------------------------------------------ annotation rate
 def test_the_frame_step_of_a_known_recording_comes_from_its_name(tmp_path):
-    from envs.replay import DEFAULT_FRAME_STEP_S, KNOWN_FRAME_STEPS_S
+    from envs.crowds.replay import DEFAULT_FRAME_STEP_S, KNOWN_FRAME_STEPS_S
 
     assert DEFAULT_FRAME_STEP_S == 0.4 and KNOWN_FRAME_STEPS_S["biwi_eth"] == pytest.approx(0.6667)
     steps = {name: ReplayConfig(path=tmp_path / name).frame_step_s
@@ -289,8 +289,8 @@ def test_the_frame_step_of_a_known_recording_comes_from_its_name(tmp_path):
 def test_the_suites_state_the_same_rates_and_their_cells_are_unchanged():
     """The benchmark cells give frame_step_s explicitly; the table agrees with every one of them, so a replay of
     the same file without --frame-step runs exactly as the suite's cell does."""
+    from envs.crowds.replay import known_frame_step
     from envs.evaluation.suite import load_suite, suite_names
-    from envs.replay import known_frame_step
 
     seen = 0
     for name in suite_names():

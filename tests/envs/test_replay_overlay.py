@@ -1,12 +1,12 @@
-"""ReplayConfig.overlay: a denser crowd from K time-shifted copies of a recording (envs.replay_overlay)."""
+"""ReplayConfig.overlay: a denser crowd from K time-shifted copies of a recording (envs.crowds.replay_overlay)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from envs.replay import ReplayConfig, ReplayCrowd
-from envs.replay_overlay import overlay_rows
+from envs.crowds.replay import ReplayConfig, ReplayCrowd
+from envs.crowds.replay_overlay import overlay_rows
 from predictor.ethucy import DEFAULT_DATA_DIR, read_trajectories
 
 ZARA03 = DEFAULT_DATA_DIR.absolute() / "eth/train/crowds_zara03_train.txt"

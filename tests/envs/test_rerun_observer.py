@@ -1,4 +1,4 @@
-"""`envs.rerun_observer.RerunObserver`: an episode written to .rrd and read back with `rerun.chunk.RrdReader`."""
+"""`envs.drawing.rerun_observer.RerunObserver`: an episode written to .rrd, read back with `rerun.chunk.RrdReader`."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from crowdsim.recording import palette
-from envs.frame import SceneFrame
+from envs.drawing.frame import SceneFrame
 
 N_STEPS, K, T = 10, 3, 4
 GROUPS = np.array([0, 0, 1, 2, 2, 2])
@@ -58,7 +58,7 @@ def _flip(xy) -> np.ndarray:
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     pytest.importorskip("rerun")
-    from envs.rerun_observer import RerunObserver
+    from envs.drawing.rerun_observer import RerunObserver
 
     path = tmp_path_factory.mktemp("rrd") / "out" / "episode.rrd"
     frames = _episode()
@@ -149,7 +149,7 @@ def test_prediction_strips_one_per_sample_and_pedestrian(recorded):
 
 def test_optional_data_absent_means_no_entity(tmp_path):
     pytest.importorskip("rerun")
-    from envs.rerun_observer import RerunObserver
+    from envs.drawing.rerun_observer import RerunObserver
 
     frame = _episode()[PLAN_STEPS]  # no plan
     frame = SceneFrame(**{**frame.__dict__, "predictions": None, "predicted_group_id": None, "scalars": {}})
@@ -163,7 +163,7 @@ def test_optional_data_absent_means_no_entity(tmp_path):
 
 def test_non_finite_robot_state_raises(tmp_path):
     pytest.importorskip("rerun")
-    from envs.rerun_observer import RerunObserver
+    from envs.drawing.rerun_observer import RerunObserver
 
     frame = _episode()[0]
     bad = SceneFrame(**{**frame.__dict__, "robot_state": np.array([np.nan, 0.0, 0.0, 0.0, 0.0])})
@@ -173,8 +173,8 @@ def test_non_finite_robot_state_raises(tmp_path):
 
 def test_module_imports_without_rerun(monkeypatch):
     monkeypatch.setitem(sys.modules, "rerun", None)  # makes `import rerun` fail
-    monkeypatch.delitem(sys.modules, "envs.rerun_observer", raising=False)
-    module = importlib.import_module("envs.rerun_observer")
+    monkeypatch.delitem(sys.modules, "envs.drawing.rerun_observer", raising=False)
+    module = importlib.import_module("envs.drawing.rerun_observer")
     with pytest.raises(ImportError):
         module.RerunObserver("never.rrd")
 
@@ -184,7 +184,7 @@ def test_the_readme_one_liner_writes_the_file_without_close(tmp_path):
     import gc
 
     pytest.importorskip("rerun")
-    from envs.rerun_observer import RerunObserver
+    from envs.drawing.rerun_observer import RerunObserver
 
     path = tmp_path / "one.rrd"
     RerunObserver(path).log(_episode()[0])
@@ -202,7 +202,7 @@ def test_an_unclosed_observer_is_finalised_at_interpreter_exit(tmp_path):
         import sys
         sys.path[:0] = {sys.path!r}
         from tests.envs.test_rerun_observer import _episode
-        from envs.rerun_observer import RerunObserver
+        from envs.drawing.rerun_observer import RerunObserver
         KEEP = RerunObserver({str(tmp_path / "exit.rrd")!r})  # a module global: alive until exit
         for frame in _episode()[:3]:
             KEEP.log(frame)

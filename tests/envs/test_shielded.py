@@ -9,11 +9,11 @@ import pytest
 
 from envs import CrowdNavEnv
 from envs.cli_options import flags_read, reads_observation
+from envs.crowds.replay import ReplayConfig
 from envs.policies import PolicyConfig, decide, make_policy
 from envs.policies.identity import artifact_files, policy_identity
 from envs.policies.shielded import ShieldedPolicy
 from envs.policies.wrappers import split_wrappers
-from envs.replay import ReplayConfig
 from envs.view import Decision, action_command
 from planner import CROWD_MPC, MPCConfig, RobotConfig
 from tests.envs.test_env import place_robot

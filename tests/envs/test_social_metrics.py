@@ -1,5 +1,5 @@
-"""`envs.social_metrics` on hand-built episodes with values computed by hand, the env's per-step path, and records
-(old files without these fields still load, aggregate and print "n/a")."""
+"""`envs.scoring.social_metrics` on hand-built episodes with values computed by hand, the env's per-step path, and
+records (old files without these fields still load, aggregate and print "n/a")."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import pytest
 from envs.evaluation.records import EpisodeRecord, RecordStore, read_records
 from envs.evaluation.report import markdown_table
 from envs.evaluation.stats import aggregate
-from envs.metrics import EpisodeMetrics, social_step
-from envs.social_metrics import (
+from envs.scoring.metrics import EpisodeMetrics, social_step
+from envs.scoring.social_metrics import (
     finite_difference_velocity,
     group_contact,
     hall_zone_index,

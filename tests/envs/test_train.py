@@ -268,7 +268,7 @@ def test_demos_of_another_layout_are_refused_before_any_work(tmp_path, capsys):
 
 
 def test_wall_rays_read_the_distance_to_the_walls():
-    from envs.geometry import ray_distances
+    from envs.scoring.geometry import ray_distances
 
     corridor = np.array([[[-10.0, 0.0], [10.0, 0.0]], [[-10.0, 2.0], [10.0, 2.0]]])  # walls at y = 0 and y = 2
     angles = np.array([0.0, np.pi / 2, np.pi, -np.pi / 2, np.pi / 4])

@@ -27,10 +27,10 @@ def _write(tmp_path: Path, data: str | bytes, name: str = "f.txt") -> Path:
 
 
 def test_every_package_reads_with_this_reader():
-    import envs.replay
+    import envs.crowds.replay
     import predictor.data
 
-    assert envs.replay.read_trajectories is read_trajectories and envs.replay.read_groups is read_groups
+    assert envs.crowds.replay.read_trajectories is read_trajectories and envs.crowds.replay.read_groups is read_groups
     assert predictor.data.DataFormatError is DataFormatError
 
 

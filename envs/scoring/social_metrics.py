@@ -1,5 +1,5 @@
 """The field's social-navigation metrics of one episode, as pure vectorised functions of arrays (definitions and
-sources: docs/envs.md, "Evaluation metrics (envs)"). The env feeds them one step at a time (`envs.metrics`); a
+sources: docs/envs.md, "Evaluation metrics (envs)"). The env feeds them one step at a time (`envs.scoring.metrics`); a
 whole recorded episode can be passed at once, with the same results.
 
 Shapes and units: robot positions (T + 1, 2) m at the step boundaries 0, dt, ..., T dt (the start included);
@@ -147,7 +147,7 @@ def time_to_collision(rel_pos: np.ndarray, rel_vel: np.ndarray, radius_sum_m: np
     if not np.all(np.isfinite(r)) or np.any(r < 0):
         raise ValueError("radius_sum_m must be finite and >= 0")
     # the smaller root of |p + t v|^2 = r^2 when the discs approach, 0 in contact, inf otherwise (the env's per-step
-    # minimum over people is `envs.kernels.min_time_to_collision`, the same floats)
+    # minimum over people is `envs.scoring.kernels.min_time_to_collision`, the same floats)
     a = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
     b = 2.0 * (p[..., 0] * v[..., 0] + p[..., 1] * v[..., 1])
     c = p[..., 0] * p[..., 0] + p[..., 1] * p[..., 1] - r * r

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.state import CrowdState
-from envs.crowd import match_ids
-from envs.replay_overlay import overlay_rows
+from envs.crowds.crowd import match_ids
+from envs.crowds.replay_overlay import overlay_rows
 from predictor.ethucy import (  # the one ETH/UCY reader (torch-free)
     GROUP_OVERLAPS,
     STEP_S,
@@ -85,7 +85,7 @@ class ReplayConfig:
         capacity: rows of the state arrays; None: the most pedestrians ever in the scene at once.
         walls: wall segments ((x0, y0), (x1, y1)) in m; none by default.
         name: scenario name; None: the trajectory file's stem (with `_x<overlay>` when overlaid).
-        overlay: superimpose this many circularly time-shifted copies of the recording (`envs.replay_overlay`):
+        overlay: superimpose this many circularly time-shifted copies of the recording (`envs.crowds.replay_overlay`):
             a crowd K times as dense from a sparse recording; 1 (the default): the recording as it is. Not with a
             group file (the copies' ids are new).
     """
@@ -175,7 +175,7 @@ def assign_slots(first: np.ndarray, last: np.ndarray) -> np.ndarray:
 
 
 class ReplayCrowd:
-    """Pedestrians replayed from a recording (see the module docstring); satisfies `envs.crowd.Crowd`.
+    """Pedestrians replayed from a recording (see the module docstring); satisfies `envs.crowds.crowd.Crowd`.
 
     Attributes:
         config: the `ReplayConfig`.
@@ -340,8 +340,9 @@ class ReplayCrowd:
         return float(np.linalg.norm(pos - point, axis=1).min()) if len(pos) else np.inf
 
     def future(self, ped_ids: np.ndarray, times_s: np.ndarray) -> np.ndarray:
-        """Privileged (the oracle's; `envs.crowd.Crowd.future`): the recorded positions (T, N, 2) m of pedestrians
-        `ped_ids` (N,) at `times_s` (T,) s from now, interpolated as the replay does, NaN once a track has ended."""
+        """Privileged (the oracle's; `envs.crowds.crowd.Crowd.future`): the recorded positions (T, N, 2) m of
+        pedestrians `ped_ids` (N,) at `times_s` (T,) s from now, interpolated as the replay does, NaN once a track has
+        ended."""
         out = np.full((len(times_s), len(ped_ids), 2), np.nan)
         for k, t in enumerate(np.asarray(times_s, float)):
             ids, pos, _ = self.positions_at(self.recording_time_s + t)

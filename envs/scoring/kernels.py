@@ -1,9 +1,9 @@
 """The env's per-step work compiled with numba: the step's robot-pedestrian distances (`step_distances`), the
 group-intrusion test (`intruded_groups`), the observation's arrays (`observation_arrays`) and the smallest time to
 collision of the social-navigation metrics (`min_time_to_collision`, the same floats as
-`envs.social_metrics.time_to_collision`).
+`envs.scoring.social_metrics.time_to_collision`).
 
-Each computes the same floats as the numpy code it replaced (`envs.geometry`, `envs.observation`; numpy's small
+Each computes the same floats as the numpy code it replaced (`envs.scoring.geometry`, `envs.observation`; numpy's small
 matrix products are reproduced with `crowdsim.fma`), in one call instead of a dozen small array operations, so
 episodes do not change; `tests/envs/test_kernels.py` compares them bit for bit.
 """
@@ -16,7 +16,7 @@ import numba
 import numpy as np
 
 from crowdsim.fma import fma
-from envs import geometry
+from envs.scoring import geometry
 
 
 @numba.njit(cache=True)
@@ -278,6 +278,6 @@ def min_time_to_collision(start: np.ndarray, robot_vel: np.ndarray, pos: np.ndar
                           radius: np.ndarray, active: np.ndarray, robot_radius: float) -> float:
     """The smallest constant-velocity time to collision (s; 0 in contact, inf on no course) between the robot's disc
     at `start` (2,) m moving at `robot_vel` (2,) m/s and the active rows of pos (S, 2) m, vel (S, 2) m/s, radius (S,)
-    m, active (S,) bool: `min(envs.social_metrics.time_to_collision(...))` over those rows, in one pass."""
+    m, active (S,) bool: `min(envs.scoring.social_metrics.time_to_collision(...))` over those rows, in one pass."""
     return float(_min_ttc(float(start[0]), float(start[1]), float(robot_vel[0]), float(robot_vel[1]), pos, vel,
                           radius, active, float(robot_radius)))

@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
-from envs.kernels import min_time_to_collision
-from envs.social_metrics import (
+from envs.scoring.kernels import min_time_to_collision
+from envs.scoring.social_metrics import (
     ITR_OFFSETS_S,
     ZONES,
     FutureIntrusions,
@@ -22,8 +22,14 @@ from envs.social_metrics import (
     zone_of,
 )
 
-if TYPE_CHECKING:
-    from envs.view import Pedestrians
+
+class Pedestrians(Protocol):
+    """The people at a state as the metrics read them (`envs.view.Pedestrians` is one; scoring imports no core
+    module): ped_id (N,), pos (N, 2) m, radius (N,) m."""
+
+    ped_id: np.ndarray
+    pos: np.ndarray
+    radius: np.ndarray
 
 
 @dataclass
@@ -68,15 +74,15 @@ class EpisodeMetrics:
     collision_with: what the robot touched: "pedestrian" or "wall".
     at_fault: who caused the contact: "robot" (the robot moved into the pedestrian; every wall contact),
         "pedestrian" (walked into a stopped or retreating robot) or "spawn" (a track that began in contact);
-        `envs.collisions`. "" without a collision.
+        `envs.scoring.collisions`. "" without a collision.
     collision_time_s: time of the collision, s (NaN without one).
     group_intrusion: whether the robot's body overlapped a ground-truth group's region on any step; None when the
         crowd has no group labels (`labelled` False: a recording without a group file).
     intrusion_fraction: fraction of steps with such an overlap (None without labels).
     spawn_contacts: contacts of kind "spawn" that did not end the episode
-        (`CrowdNavConfig.spawn_contact_ends_episode` False; `envs.collisions.SpawnContacts`).
+        (`CrowdNavConfig.spawn_contact_ends_episode` False; `envs.scoring.collisions.SpawnContacts`).
 
-    The social-navigation metrics (`envs.social_metrics`; fed by `observe` once per step):
+    The social-navigation metrics (`envs.scoring.social_metrics`; fed by `observe` once per step):
     time_<zone>_s / <zone>_fraction: seconds / fraction of the steps with the nearest person in that Hall zone
         (intimate, personal, social; exclusive bands, robot edge to person centre).
     group_collision: whether the robot touched a member of a group of >= 2 (None without group labels).
@@ -223,7 +229,7 @@ def social_step(start: np.ndarray, end: np.ndarray, dt_s: float, robot_radius_m:
                 surface_m: np.ndarray, group_id: np.ndarray, before_pos: np.ndarray, before_vel: np.ndarray,
                 before_radius: np.ndarray, before_active: np.ndarray | None = None) -> SocialStep:
     """The env's step as `SocialStep`: start, end (2,) m the robot's positions; centre_m, surface_m (n,) m the
-    distances to the n people present at the end (`envs.kernels.step_distances`, contacts that do not count
+    distances to the n people present at the end (`envs.scoring.kernels.step_distances`, contacts that do not count
     already +inf), group_id (n,) their groups; before_pos (m, 2) m, before_vel (m, 2) m/s, before_radius (m,) m
     the crowd's rows at the start, of which the `before_active` (m,) bool ones are present (None: all)."""
     nearest = float(centre_m.min()) - robot_radius_m if len(centre_m) else math.inf

@@ -5,11 +5,11 @@ need it. Rerun's 2D views are y-down: every position is logged as (x, -y) so the
 
 Entities (timelines `step`, a sequence, and `sim_time`, a duration in s):
     world                   static AnnotationContext: class id k = group k, colour `palette()[k % 24]` (the
-                            colours of `crowdsim.recording` and `envs.render`); extended when a larger group id
+                            colours of `crowdsim.recording` and `envs.drawing.render`); extended when a larger group id
                             appears.
     world/walls             static LineStrips2D, one strip per wall segment.
     world/pedestrians       Points2D, radius = body radius (m), class id = group id, label = ped id (hidden).
-    world/groups            LineStrips2D linking the members of each group (`envs.render.group_links`), class id
+    world/groups            LineStrips2D linking the members of each group (`envs.drawing.render.group_links`), class id
                             = group id.
     world/robot             Points2D with the robot radius; world/robot/heading an Arrows2D (heading = state[2],
                             or the velocity for the holonomic (x, y, vx, vy) state).
@@ -43,8 +43,8 @@ from typing import Any
 import numpy as np
 
 from crowdsim.recording import N_COLOURS, palette
-from envs.frame import SceneFrame
-from envs.render import group_links, robot_heading, validate_frame
+from envs.drawing.frame import SceneFrame
+from envs.drawing.render import group_links, robot_heading, validate_frame
 
 WALL_COLOUR = (200, 200, 200)
 ROBOT_COLOUR = (240, 240, 240)
@@ -103,7 +103,7 @@ class RerunObserver:
 
         Raises:
             ValueError: non-finite robot state, goal, pedestrian positions or radii; group ids outside
-                0..65535; inconsistent shapes (see `envs.render.validate_frame`).
+                0..65535; inconsistent shapes (see `envs.drawing.render.validate_frame`).
             RuntimeError: after `close()`.
         """
         if self._closed:

@@ -1,7 +1,7 @@
 """Crowd sources behind one small interface: the social-force simulator, or a replayed recording.
 
 The env only talks to a `Crowd`. `SimCrowd` wraps `crowdsim.CrowdSimulator` (reactive pedestrians, optional
-robot visibility); `envs.replay.ReplayCrowd` replays an ETH/UCY-format file (non-reactive pedestrians).
+robot visibility); `envs.crowds.replay.ReplayCrowd` replays an ETH/UCY-format file (non-reactive pedestrians).
 """
 
 from __future__ import annotations

@@ -95,8 +95,8 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
 
 def _segment_distance(px: float, py: float, a: tuple[float, float], b: tuple[float, float]) -> float:
     """`point_segment_distances` of one segment a -> b on Python floats: a scalar twin for the per-step convex-hull
-    test, where numpy's per-call overhead dominates (`envs.kernels` compiles the same operations); checked against
-    the planner's vectorised one in tests/envs/test_env_fast_paths.py."""
+    test, where numpy's per-call overhead dominates (`envs.scoring.kernels` compiles the same operations); checked
+    against the planner's vectorised one in tests/envs/test_env_fast_paths.py."""
     abx, aby = b[0] - a[0], b[1] - a[1]
     den = abx * abx + aby * aby
     t = ((px - a[0]) * abx + (py - a[1]) * aby) / (den if den > 1e-12 else 1e-12)

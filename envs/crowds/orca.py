@@ -1,7 +1,7 @@
 """`OrcaCrowd`: CrowdNav's crowd (ORCA humans crossing a circle) behind the env's `Crowd` interface.
 
 It exists so that results compare with the CrowdNav literature (SARL, CrowdNav++); the default crowd stays the
-social-force simulator (`envs.crowd.SimCrowd`). What it reproduces (vita-epfl/CrowdNav, `crowd_sim.py`,
+social-force simulator (`envs.crowds.crowd.SimCrowd`). What it reproduces (vita-epfl/CrowdNav, `crowd_sim.py`,
 `policy/orca.py`, `configs/env.config`; README "CrowdNav's settings" lists what differs):
 
 - circle crossing: each human starts on a circle of radius `radius_m` (scenario option) plus a uniform offset per
@@ -9,7 +9,7 @@ social-force simulator (`envs.crowd.SimCrowd`). What it reproduces (vita-epfl/Cr
   point opposite its start; a start is redrawn while it is closer than r_h + r_other + `spawn_gap_m` to the start
   or goal of the robot or of a human placed before it;
 - every `params.time_step_s` each human takes the ORCA velocity towards its goal (preferred velocity:
-  `envs.rvo.pref_velocity`), avoiding every other human and, when `robot_visible`, the robot; it then walks in a
+  `envs.crowds.rvo.pref_velocity`), avoiding every other human and, when `robot_visible`, the robot; it then walks in a
   straight line at that velocity. By default a human who arrives stays at its goal (CrowdNav's test episodes);
 - CrowdNav++'s livelier humans, each off by default (its `crowd_nav/configs/config.py` and `crowd_sim_pred.py`):
   `randomize_attributes` draws every human's radius from U(0.3, 0.5) m and v_pref from U(0.5, 1.5) m/s;
@@ -26,7 +26,7 @@ social-force simulator (`envs.crowd.SimCrowd`). What it reproduces (vita-epfl/Cr
 Groups: ORCA humans walk alone. `group_id` is the truth, every human its own group, so `group_labels` is True and
 group intrusion, measured, is 0 by construction (a group of one is no region).
 No walls: `CrowdNavConfig` refuses crowd model "orca" in any scenario but circle_crossing.
-ORCA holds no state between steps (`envs.rvo`): the crowd is its arrays, so `future` steps a copy of them.
+ORCA holds no state between steps (`envs.crowds.rvo`): the crowd is its arrays, so `future` steps a copy of them.
 """
 
 from __future__ import annotations
@@ -34,16 +34,16 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from crowdsim import CrowdState
-from envs.crowd import rows_of
-from envs.rvo import OrcaParams, load_pyrvo, orca_velocities, pref_velocity
+from envs.crowds.crowd import rows_of
+from envs.crowds.rvo import OrcaParams, load_pyrvo, orca_velocities, pref_velocity
 
 if TYPE_CHECKING:
-    from envs.config import CrowdNavConfig
+    from planner import RobotConfig
 
 ROBOT_ROUTES = ("fixed", "random")
 START_NOISES = ("centred", "positive")
@@ -60,7 +60,8 @@ class OrcaCrowdConfig:
 
     human_radius_m: body radius of every human, m.
     human_v_pref_mps: preferred (and maximum) speed of every human, m/s.
-    neighbor_dist_m, max_neighbors, time_horizon_s, time_horizon_obst_s, safety_space_m: ORCA's (`envs.rvo.OrcaParams`).
+    neighbor_dist_m, max_neighbors, time_horizon_s, time_horizon_obst_s, safety_space_m: ORCA's
+        (`envs.crowds.rvo.OrcaParams`).
     time_step_s: ORCA's decision period (CrowdNav's env step); a whole multiple of the env's dt_s, s.
     spawn_gap_m: extra surface gap between a new start and the others' starts and goals (CrowdNav's
         discomfort_dist), m.
@@ -76,7 +77,7 @@ class OrcaCrowdConfig:
 
     human_radius_m: float = 0.3
     human_v_pref_mps: float = 1.0
-    # ORCA's settings: `envs.rvo.OrcaParams` owns CrowdNav's values
+    # ORCA's settings: `envs.crowds.rvo.OrcaParams` owns CrowdNav's values
     neighbor_dist_m: float = OrcaParams.neighbor_dist_m
     max_neighbors: int = OrcaParams.max_neighbors
     time_horizon_s: float = OrcaParams.time_horizon_s
@@ -119,12 +120,25 @@ class OrcaCrowdConfig:
                           self.safety_space_m, self.time_step_s)
 
 
+class OrcaSetting(Protocol):
+    """What `OrcaCrowd` reads of a config (`envs.config.CrowdNavConfig` is one): `orca`, n_pedestrians, the scenario's
+    name and options (`radius_m`, m), robot_visible, the robot's body (`robot.radius_m`, m) and the env step dt_s, s."""
+
+    orca: OrcaCrowdConfig
+    n_pedestrians: int
+    scenario: str
+    scenario_options: tuple[tuple[str, float], ...]
+    robot_visible: bool
+    robot: RobotConfig
+    dt_s: float
+
+
 class OrcaCrowd:
     """N ORCA humans crossing a circle (module docstring), stepped at the env's dt_s."""
 
     group_labels = True  # the truth: every human walks alone
 
-    def __init__(self, config: CrowdNavConfig) -> None:
+    def __init__(self, config: OrcaSetting) -> None:
         load_pyrvo()  # a missing package fails here, once, before any episode
         self.cfg = config.orca
         self.params = self.cfg.params

@@ -8,7 +8,7 @@ Conventions:
       (c + 0.5, r + 0.5). `world_to_pixel` returns continuous (column, row) coordinates; `np.floor` gives the
       index of the pixel that contains a point.
     * Colours: pedestrians are filled discs of their true radius in `palette()[group_id % 24]`, the same
-      colours as `crowdsim.recording` and `envs.rerun_observer`. A pedestrian alone (a group of one) keeps its
+      colours as `crowdsim.recording` and `envs.drawing.rerun_observer`. A pedestrian alone (a group of one) keeps its
       own palette colour, so colours agree across the viewers; groups are made visible by thin links in the
       group colour that join the members in angular order around the group centroid (a segment for a pair,
       an outline for three or more). Predictions are thin polylines from each pedestrian's current position,
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crowdsim.recording import N_COLOURS, palette
-from envs.frame import SceneFrame
+from envs.drawing.frame import SceneFrame
 
 BACKGROUND = np.array([248, 248, 248], dtype=np.uint8)
 WALL = np.array([70, 70, 70], dtype=np.uint8)
