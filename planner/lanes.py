@@ -2,9 +2,9 @@
 
 The MPC's goal cost pulls straight at the goal. In a bidirectional corridor or street that line runs into the
 oncoming flow: the MPC dodges one walker after another, is pushed back, turns at speed and is herded out of the
-corridor (traced in docs/results/planner.md, "Against the reference"). People in such a flow form lanes; a robot that joins the
-lane going its way meets walkers at a small relative speed. `LaneKeeper.subgoal` does that with one number, a
-lateral offset of the subgoal:
+corridor (traced in docs/results/planner.md, "Against the reference"). People in such a flow form lanes; a robot
+that joins the lane going its way meets walkers at a small relative speed. `LaneKeeper.subgoal` does that with one
+number, a lateral offset of the subgoal:
 
 1. ``d``: the unit vector from the robot to its goal, ``n`` its left normal. Used only while the goal is in sight
    (the route layer, planner/route.py, handles walls in the way) and farther than ``min_goal_distance_m``.

@@ -2,9 +2,9 @@
 people on the way, and which of those places is nearest the goal.
 
 The MPC optimises locally from its warm start and the goal's pull. Among oncoming walkers every local move can look
-unsafe; the safety shield then runs (docs/results/planner.md, "Against the reference"). Yet a path usually exists (the benchmark's
-reachable-set bounds, `envs/evaluation/reachability.py`, find one for the oracle's failures): through a gap that
-opens later, or by waiting. `SpaceTimeSearch.subgoal` looks for it:
+unsafe; the safety shield then runs (docs/results/planner.md, "Against the reference"). Yet a path usually exists
+(the benchmark's reachable-set bounds, `envs/evaluation/reachability.py`, find one for the oracle's failures):
+through a gap that opens later, or by waiting. `SpaceTimeSearch.subgoal` looks for it:
 
 1. A local grid (``cell_m``) around the robot, as wide as the robot can go over the horizon.
 2. Every ``step_s`` up to the horizon, the cells whose centre keeps robot radius + person radius + ``clearance_m``

@@ -68,7 +68,6 @@ def _for(name: str, config: CrowdNavConfig) -> CrowdNavConfig:
     """`config` with the robot a registry policy runs and the wall rays a packaged agent was trained with."""
     from envs.evaluation.benchmark import observed
     from envs.policies import PolicyConfig
-    from envs.policies.registry import ENV_MPC
     from envs.policies.identity import agent_wall_rays
 
     return observed(replace(config, robot=_robot_for(name)), agent_wall_rays(PolicyConfig(name)))
