@@ -175,6 +175,10 @@ class MPCConfig:
     # inf (default) trusts the soft constraints. Starts in collision are always rejected.
     max_slack_m: float = float("inf")
     max_plan_reuse_steps: int = 3  # how many steps a previous plan may be replayed in fallback
+    # Passing options: solve from the n_starts cheapest distinct initial guesses (the shifted plan and the go-to-goal
+    # rollouts at HEADING_OFFSETS_RAD, which pass people on different sides) and keep the solved plan of lowest
+    # cost; 1 (default) = one solve from the cheapest guess, the MPC before 2026-11-28. Costs up to n_starts solves.
+    n_starts: int = 1
     verbose: bool = False
     # -- crowd risk (planner/risk.py); the defaults leave the plain MPC above unchanged --------------------
     # Which M pedestrians are constrained: "distance" (nearest now) or "predicted" (closest to the robot's
@@ -225,7 +229,7 @@ class MPCConfig:
 
     def __post_init__(self) -> None:
         _check_name("solver", self.solver, SOLVERS)
-        _check_positive(self, ("dt_s", "horizon_steps", "max_peds", "n_modes", "comfort_distance_m",
+        _check_positive(self, ("dt_s", "horizon_steps", "max_peds", "n_modes", "n_starts", "comfort_distance_m",
                                "max_group_span_m", "time_budget_s", "max_iter", "tolerance"))
         if self.wall_margin_m is not None:
             _check_non_negative(self, ("wall_margin_m",))

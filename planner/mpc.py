@@ -24,6 +24,20 @@ HEADING_OFFSETS_RAD = (0.0, -0.6, 0.6, -1.2, 1.2)  # first-guess directions rela
 
 
 @dataclass(frozen=True)
+class _Try:
+    """One solve: the solution w, its outcome (``MPCPlanner._classify``), the solver's status, wall time (s),
+    iterations, largest slack (m) and objective (inf where not finite)."""
+
+    w: np.ndarray
+    status: str
+    solver_status: str
+    elapsed: float
+    iters: int
+    max_slack: float
+    cost: float
+
+
+@dataclass(frozen=True)
 class _Plan:
     """A stored plan starting at the current step: states (H+1, nz), controls (H, nu); age in steps."""
 
@@ -158,24 +172,33 @@ class MPCPlanner:
             depth = scene.start_penetration_m
             return self._fallback(state, "infeasible", "start in collision", 0.0, 0, depth)
         p = pack_params(ocp.sizes, state, goal, scene)
-        w0 = self._initial_guess(state, goal, p)
+        tries = [self._solve_from(w0, p) for w0 in self._initial_guesses(state, goal, p, cfg.n_starts)]
+        elapsed, iters = sum(t.elapsed for t in tries), sum(t.iters for t in tries)
+        solved = [t for t in tries if t.status == "solved"]
+        best = min(solved, key=lambda t: t.cost) if solved else tries[0]
+        if best.status != "solved":
+            return self._fallback(state, best.status, best.solver_status, elapsed, iters, best.max_slack)
+        w, solver_status, max_slack = best.w, best.solver_status, best.max_slack
+        states, controls = w[ocp.layout.z], w[ocp.layout.u]
+        self._plan = _Plan(states, controls, 0)
+        return PlanResult(controls[0].copy(), states, controls, "solved", solver_status, elapsed, iters,
+                          max_slack, None)
+
+    def _solve_from(self, w0: np.ndarray, p: np.ndarray) -> _Try:
+        """One solve of the NLP from the initial guess ``w0``, classified (``_classify``)."""
+        ocp = self.ocp
         start = time.perf_counter()
         sol = ocp.solver(x0=w0, p=p, lbx=ocp.lbx, ubx=ocp.ubx, lbg=ocp.lbg, ubg=ocp.ubg)
         elapsed = time.perf_counter() - start
         stats = ocp.solver.stats()
         w = sol["x"].full().ravel()
-        iters = int(stats.get("iter_count", 0))
         solver_status = str(stats.get("return_status", stats.get("unified_return_status", "")))
         finite = bool(np.all(np.isfinite(w)))
         slack = ocp.slack_fn(w, p).full().reshape(ocp.layout.s.shape) if finite else np.full((1, 1), np.inf)
         status = self._classify(stats, elapsed, finite, float(slack[:2].max(initial=0.0)))
-        max_slack = float(slack.max(initial=0.0))
-        if status != "solved":
-            return self._fallback(state, status, solver_status, elapsed, iters, max_slack)
-        states, controls = w[ocp.layout.z], w[ocp.layout.u]
-        self._plan = _Plan(states, controls, 0)
-        return PlanResult(controls[0].copy(), states, controls, "solved", solver_status, elapsed, iters,
-                          max_slack, None)
+        cost = float(sol["f"]) if finite else np.inf
+        return _Try(w, status, solver_status, elapsed, int(stats.get("iter_count", 0)), float(slack.max(initial=0.0)),
+                    cost if np.isfinite(cost) else np.inf)
 
     def _classify(self, stats: dict, elapsed: float, finite: bool, first_slack: float) -> str:
         """Outcome of a solve; ``first_slack`` is the clearance violation (m) at the first planned step."""
@@ -190,11 +213,12 @@ class MPCPlanner:
             return "infeasible"
         return "solved"
 
-    def _initial_guess(self, state: np.ndarray, goal: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """The cheapest of a few candidate guesses under the NLP's own cost: the shifted previous plan
-        (if any) and go-to-goal rollouts aimed straight and at +-HEADING_OFFSETS_RAD from the goal
-        direction (this breaks symmetric dead-locks such as a pedestrian right on the path). Slacks
-        are set to their minimal feasible values, which fatrop needs."""
+    def _initial_guesses(self, state: np.ndarray, goal: np.ndarray, p: np.ndarray, n: int) -> list[np.ndarray]:
+        """The ``n`` cheapest of a few candidate guesses under the NLP's own cost, cheapest first: the shifted
+        previous plan (if any) and go-to-goal rollouts aimed straight and at +-HEADING_OFFSETS_RAD from the goal
+        direction (this breaks symmetric dead-locks such as a pedestrian right on the path; with n > 1 the
+        rollouts pass people on different sides). Slacks are set to their minimal feasible values, which fatrop
+        needs. NaN and inf costs never win; if none is finite, the last candidate alone."""
         layout = self.ocp.layout
         states, controls = self._goal_rollouts(state, goal, np.array(HEADING_OFFSETS_RAD))
         candidates = list(zip(states, controls, strict=True))
@@ -208,8 +232,11 @@ class MPCPlanner:
         slack_map, cost_map = self._maps(len(candidates))
         w[layout.s.ravel()] = slack_map(w, p).full()
         cost = cost_map(w, p).full().ravel()
-        finite = cost < np.inf  # NaN and inf never win; if none is finite, the last candidate
-        return w[:, int(np.argmin(np.where(finite, cost, np.inf))) if finite.any() else -1].copy()
+        finite = cost < np.inf
+        if not finite.any():
+            return [w[:, -1].copy()]
+        order = np.argsort(np.where(finite, cost, np.inf), kind="stable")[: min(n, int(finite.sum()))]
+        return [w[:, j].copy() for j in order]
 
     def _maps(self, n: int) -> tuple:
         """The NLP's slack and cost functions over n candidate columns (`casadi.Function.map`: the same operations

@@ -270,12 +270,46 @@ def test_initial_guess_is_the_cheapest_candidate_under_the_nlp_cost(goal):
         cands = list(zip(states, controls, strict=True))
         if planner._plan is not None:
             cands.insert(0, (np.vstack([state, planner._plan.states[1:]]), planner._plan.controls))
-        best, best_cost = None, np.inf
+        ws, costs = [], []
         for cand_states, cand_controls in cands:
             w = np.zeros(layout.n)
             w[layout.z], w[layout.u] = cand_states, cand_controls
             w[layout.s] = ocp.slack_fn(w, p).full().reshape(layout.s.shape)
-            if float(ocp.cost_fn(w, p)) < best_cost:
-                best, best_cost = w, float(ocp.cost_fn(w, p))
-        assert np.array_equal(planner._initial_guess(state, goal, p), best)
+            ws.append(w)
+            costs.append(float(ocp.cost_fn(w, p)))
+        order = sorted(range(len(ws)), key=lambda j: costs[j])  # stable: the first of equal costs first
+        assert np.array_equal(planner._initial_guesses(state, goal, p, 1)[0], ws[order[0]])
+        three = planner._initial_guesses(state, goal, p, 3)  # passing options: the three cheapest, cheapest first
+        assert len(three) == 3
+        for got, j in zip(three, order[:3], strict=True):
+            assert np.array_equal(got, ws[j])
         planner.plan(state, goal, pred)
+
+
+def test_more_starts_never_keep_a_costlier_plan(goal):
+    """n_starts = 3 solves from the three cheapest guesses and keeps the solved plan of lowest cost: its objective
+    is at most the one-start plan's (which is one of its tries), and with n_starts = 1 the plan is the same as the
+    MPC's before the option, bit for bit (the one-start planner is the default config)."""
+    pred = frozen_prediction(np.array([[2.0, 0.05], [2.6, -0.5], [2.6, 0.6]]), group_ids=np.array([0, 1, 2]), **PRED)
+    state = np.array([0.0, 0.0, 0.0, 0.8, 0.0])
+    one, three = MPCPlanner(make_config()), MPCPlanner(make_config(n_starts=3))
+    assert one.config.n_starts == 1
+    r1, r3 = one.plan(state, goal, pred), three.plan(state, goal, pred)
+    assert r1.status == r3.status == "solved"
+    cost = one.ocp.cost_fn
+    from planner.ocp import pack_params
+    from planner.scene import build_scene
+
+    p = pack_params(one.ocp.sizes, state, goal, build_scene(state, pred, None, one.config, goal))
+
+    def objective(planner, result):
+        layout = planner.ocp.layout
+        w = np.zeros(layout.n)
+        w[layout.z], w[layout.u] = result.states, result.controls
+        w[layout.s] = planner.ocp.slack_fn(w, p).full().reshape(layout.s.shape)
+        return float(cost(w, p))
+
+    assert objective(three, r3) <= objective(one, r1) * (1 + 1e-3) + 1e-6  # slacks at their optimum, to tolerance
+    assert r3.iterations >= r1.iterations  # it ran more solves
+    with pytest.raises(ValueError, match="n_starts"):
+        make_config(n_starts=0)
