@@ -3,9 +3,10 @@ scripts/measure_group_speed.py).
 
 An independent check of one 300 s plaza run (24 people) found 1.22 / 1.22 / 1.18 / 1.27 / 1.14 m/s for groups of
 1-5: no fall with size. Each group draws its desired speed from N(1.34 - 0.02 (n - 1), 0.26) m/s, so one run's few
-groups of 4-5 scatter by ~0.1 m/s; over 10 seeds x 600 s (seeds 2000-2009) the plaza gives 1.239 / 1.194 / 1.159 /
-1.103 / 1.094 m/s. The test measures the fall with that draw replaced by its expectation
-(`GroupWalks.relative_by_size`), on its own seeds.
+groups of 4-5 scatter by ~0.1 m/s; over 10 seeds x 600 s (seeds 2000-2009) the plaza gives 1.253 / 1.204 / 1.170 /
+1.103 / 1.028 m/s (1.239 / 1.194 / 1.159 / 1.103 / 1.094 before people walked round corners, `crowdsim.detour`).
+The test measures the fall with that draw replaced by its expectation (`GroupWalks.relative_by_size`), on its own
+seeds.
 """
 
 from __future__ import annotations
