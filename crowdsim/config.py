@@ -63,13 +63,15 @@ class SocialForceParams:
     slowdown_radius_m: float = 1.0  # the desired speed ramps down linearly inside this distance
     fluctuation_mps2: float = 0.1  # std of a random acceleration per force step (Helbing–Molnár's fluctuations);
     # it breaks the exact symmetry of head-on encounters, which otherwise deadlock
+    detour_clearance_m: float = 0.6  # a pedestrian whose goal is behind a wall aims this far off the wall's end,
+    # outside the corner (`crowdsim.detour`); 0: straight at the goal always (the model before, bit for bit)
 
     def __post_init__(self) -> None:
         for name in ("relaxation_time_s", "desired_speed_mean_mps", "ped_range_m", "wall_range_m",
                      "cutoff_m", "arrival_radius_m", "slowdown_radius_m", "desired_speed_max_mps"):
             _positive(name, getattr(self, name))
         for name in ("desired_speed_std_mps", "desired_speed_min_mps", "ped_strength_mps2",
-                     "wall_strength_mps2", "fluctuation_mps2"):
+                     "wall_strength_mps2", "fluctuation_mps2", "detour_clearance_m"):
             _non_negative(name, getattr(self, name))
         _in_range("anisotropy", self.anisotropy, 0.0, 1.0)
         if self.max_speed_factor < 1.0:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crowdsim import behaviours, forces, kernels
+from crowdsim import behaviours, detour, forces, kernels
 from crowdsim.config import SimConfig
 from crowdsim.events import apply_events
 from crowdsim.groups import (
@@ -48,6 +48,7 @@ class CrowdSimulator:
         self.rng = np.random.default_rng(0)
         self.robot: Robot | None = None
         self._params = kernels.pack_params(self.config.social, self.config.group_forces)
+        self._corners = detour.Corners.of(self.scenario.walls, self.config.social.detour_clearance_m)
         self._reset_storage()
 
     # ----------------------------------------------------------------------------------------- setup
@@ -222,11 +223,12 @@ class CrowdSimulator:
         s, cfg = self.slots, self.config
         idx, labels, gaze = self._active_index()
         pos, vel = s.pos[idx], s.vel[idx]
+        aim = (detour if reference else kernels).aims(pos, s.goal[idx], self._corners, cfg.social.slowdown_radius_m)
         if reference:
-            v_des = forces.desired_velocity(pos, s.goal[idx], s.speed[idx], cfg.social)
+            v_des = forces.desired_velocity(pos, aim, s.speed[idx], cfg.social)
             e = forces.headings(vel, v_des)
         else:
-            v_des, e = kernels.desired_and_heading(pos, vel, s.goal[idx], s.speed[idx], cfg.social.slowdown_radius_m)
+            v_des, e = kernels.desired_and_heading(pos, vel, aim, s.speed[idx], cfg.social.slowdown_radius_m)
         radius = s.radius[idx]
         pos_all, rad_all, e_all, lab_all = pos, radius, e, labels
         if self.robot is not None and cfg.robot.visible:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crowdsim import behaviours
 from crowdsim.config import SimConfig
 from crowdsim.sim import CrowdSimulator
 
@@ -99,3 +100,78 @@ def group_pair_geometry(obs: np.ndarray, group_id: np.ndarray, dt_s: float = 0.4
     vel = np.diff(obs, axis=0) / dt_s
     rel = np.linalg.norm(vel[:, iu] - vel[:, ju], axis=-1).mean(axis=0)
     return dist, rel
+
+
+@dataclass(frozen=True)
+class GroupWalks:
+    """Walking speed per group, and the crowd's grouped share over time, of runs of one config over seeds.
+
+    One row per group and run: speed (G,) m/s, the mean over its members of each member's mean |velocity| over
+    its walking steps (not stopping or standing, after its first `skip` steps); desired (G,) m/s, the same mean of
+    its members' desired speeds; size (G,) int, the group's size over most of those member-steps; seed (G,) int.
+    share (R, T): the fraction of the active pedestrians in groups of two or more at each of T recorded steps of
+    each of R runs (time record_dt_s apart)."""
+
+    speed: np.ndarray
+    desired: np.ndarray
+    size: np.ndarray
+    seed: np.ndarray
+    share: np.ndarray
+
+    def by_size(self, size: int) -> np.ndarray:
+        """(g,) walking speeds (m/s) of the groups of `size`."""
+        return self.speed[self.size == size]
+
+    def relative_by_size(self, size: int, drop_per_member_mps: float) -> np.ndarray:
+        """(g,) m/s per group of `size`: speed - desired - drop_per_member_mps (size - 1), drop the configured
+        `GroupConfig.speed_drop_per_member_mps`. Its mean minus that of size 1 estimates mean(by_size(size)) -
+        mean(by_size(1)) (up to the clipping of desired speeds) with each group's draw of desired speed (spread
+        0.26 m/s) replaced by its expectation, as `WalkingSpeeds.relative_speed_by_size` does."""
+        chosen = self.size == size
+        return self.speed[chosen] - self.desired[chosen] - drop_per_member_mps * (size - 1)
+
+
+def group_walks(config: SimConfig, seeds: list[int] | tuple[int, ...] | range, steps: int = 1000,
+                skip: int = 5) -> GroupWalks:
+    """Run `config` for `steps` recorded steps per seed; see `GroupWalks`. A group's size is counted each step
+    among the active pedestrians (a group that is partly through its exit counts as smaller)."""
+    rows, share = [], []
+    for seed in seeds:
+        sim = CrowdSimulator(config)
+        sim.reset(seed)
+        first: dict[int, int] = {}
+        walks: dict[int, list[tuple[int, int, float, float]]] = {}  # ped id -> (label, size, speed, desired)
+        shares = []
+        for k in range(steps):
+            s = sim.step()
+            act = np.flatnonzero(s.active)
+            counts = np.bincount(s.group_id[act])[s.group_id[act]]
+            shares.append(float((counts >= 2).mean()) if len(act) else np.nan)
+            moving = ~behaviours.stopped(sim.book, s.label[act]) if sim.book.stops else np.ones(len(act), bool)
+            speeds = np.hypot(s.vel[act, 0], s.vel[act, 1])
+            for a, n, v, want, go in zip(act.tolist(), counts.tolist(), speeds.tolist(),
+                                         sim.slots.speed[act].tolist(), moving.tolist(), strict=True):
+                pid = int(s.ped_id[a])
+                if k - first.setdefault(pid, k) >= skip and go:
+                    walks.setdefault(pid, []).append((int(s.label[a]), n, v, want))
+        rows.extend((seed, *row) for row in _group_rows(walks))
+        share.append(shares)
+    seed_, speed, desired, size = (np.array(c) for c in zip(*rows, strict=True)) if rows else [np.zeros(0)] * 4
+    return GroupWalks(speed.astype(float), desired.astype(float), size.astype(int), seed_.astype(int),
+                      np.array(share, dtype=float).reshape(len(share), steps))
+
+
+def _group_rows(walks: dict[int, list[tuple[int, int, float, float]]]) -> list[tuple[float, float, int]]:
+    """(speed, desired, size) per group label from per-pedestrian walks (label, size, speed, desired); a member
+    counts for the label it held most steps."""
+    groups: dict[int, list[tuple[float, float, np.ndarray]]] = {}
+    for walk in walks.values():
+        labels, sizes, speeds, wants = np.array(walk).T
+        label = int(np.bincount(labels.astype(int)).argmax())
+        groups.setdefault(label, []).append((speeds.mean(), wants.mean(), sizes.astype(int)))
+    rows = []
+    for members in groups.values():
+        sizes = np.concatenate([m[2] for m in members])
+        rows.append((float(np.mean([m[0] for m in members])), float(np.mean([m[1] for m in members])),
+                     int(np.bincount(sizes).argmax())))
+    return rows
