@@ -63,8 +63,11 @@ class SocialForceParams:
     slowdown_radius_m: float = 1.0  # the desired speed ramps down linearly inside this distance
     fluctuation_mps2: float = 0.1  # std of a random acceleration per force step (Helbing–Molnár's fluctuations);
     # it breaks the exact symmetry of head-on encounters, which otherwise deadlock
-    detour_clearance_m: float = 0.6  # a pedestrian whose goal is behind a wall aims this far off the wall's end,
-    # outside the corner (`crowdsim.detour`); 0: straight at the goal always (the model before, bit for bit)
+    # a pedestrian whose goal is behind a wall aims this far off the wall's end, outside the corner
+    # (`crowdsim.detour`; 0.6 m fixes people stuck behind corners, docs/decisions/crowdsim-group-walking.md); 0
+    # (default until the benchmark's next suite version, so that every recorded episode stays as it was): straight
+    # at the goal always
+    detour_clearance_m: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("relaxation_time_s", "desired_speed_mean_mps", "ped_range_m", "wall_range_m",

@@ -30,7 +30,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from crowdsim.config import GroupConfig, GroupForceParams, SimConfig
+from crowdsim.config import GroupConfig, GroupForceParams, SimConfig, SocialForceParams
 from crowdsim.walking import GroupWalks, group_walks
 
 SCENARIOS = ("plaza", "corridor", "crossing")
@@ -71,7 +71,8 @@ def summarise(walks: GroupWalks, steps_per_window: int, drop_per_member_mps: flo
 def config_for(scenario: str, people: int, overrides: dict[str, dict[str, float]]) -> SimConfig:
     config = SimConfig(scenario=scenario, n_pedestrians=people)
     return replace(config, groups=replace(GroupConfig(), **overrides.get("groups", {})),
-                   group_forces=replace(GroupForceParams(), **overrides.get("group_forces", {})))
+                   group_forces=replace(GroupForceParams(), **overrides.get("group_forces", {})),
+                   social=replace(SocialForceParams(), **overrides.get("social", {})))
 
 
 def report(scenario: str, result: dict) -> None:
@@ -88,14 +89,15 @@ def report(scenario: str, result: dict) -> None:
 
 
 def parse_overrides(items: list[str]) -> dict[str, dict[str, float]]:
-    """`groups.field=value` / `group_forces.field=value` strings to {part: {field: value}}."""
+    """`groups.field=value` / `group_forces.field=value` / `social.field=value` strings to {part: {field: value}}."""
     out: dict[str, dict[str, float]] = {}
     for item in items:
         key, _, value = item.partition("=")
         part, _, name = key.partition(".")
-        fields = {"groups": GroupConfig, "group_forces": GroupForceParams}.get(part)
+        fields = {"groups": GroupConfig, "group_forces": GroupForceParams, "social": SocialForceParams}.get(part)
         if fields is None or name not in fields.__dataclass_fields__ or not value:
-            raise ValueError(f"--set {item!r}: expected groups.FIELD=VALUE or group_forces.FIELD=VALUE")
+            raise ValueError(f"--set {item!r}: expected groups.FIELD=VALUE, group_forces.FIELD=VALUE or "
+                             "social.FIELD=VALUE")
         out.setdefault(part, {})[name] = float(value)
     return out
 
@@ -107,7 +109,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration-s", type=float, default=600.0)
     ap.add_argument("--window-s", type=float, default=60.0)
     ap.add_argument("--people", type=int, default=24)
-    ap.add_argument("--set", action="append", default=[], help="groups.FIELD=VALUE or group_forces.FIELD=VALUE")
+    ap.add_argument("--set", action="append", default=[],
+                    help="groups.FIELD=VALUE, group_forces.FIELD=VALUE or social.FIELD=VALUE (e.g. "
+                    "social.detour_clearance_m=0.6: people walk round wall corners)")
     ap.add_argument("--small", action="store_true", help="2 seeds x 60 s of plaza (the test's size)")
     args = ap.parse_args(argv)
     try:

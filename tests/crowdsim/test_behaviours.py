@@ -53,15 +53,13 @@ def test_stopped_groups_stand_still_in_their_fformation_and_then_walk_on():
     assert len(standing_speeds) > 500 and ended >= 5
     assert np.median(standing_speeds) < 0.1  # they stand (body sway from the fluctuation force aside)
     assert abs(np.median(radius_errors)) < 0.15  # in the circle they were given
-    # groups whose stop ended walked on: they are either gone through an exit, moving (standing people sway at
-    # under 0.1 m/s) or stopped again (on their way to, or standing at, a new stop). Moving, not at walking pace:
-    # at the last step a pair may be squeezing past a standing group (0.47 m/s on this seed since people walk
-    # round corners, crowdsim.detour)
+    # groups whose stop ended walked on: they are either gone through an exit, moving at walking pace or stopped
+    # again (on their way to, or standing at, a new stop)
     state = sim.state()
     for label in watch:
         members = state.active & (state.label == label)
         if members.any() and state.time_s - watch[label] > 5.0 and label not in sim.book.stops:
-            assert np.linalg.norm(state.vel[members], axis=1).mean() > 0.3
+            assert np.linalg.norm(state.vel[members], axis=1).mean() > 0.5
 
 
 def test_no_stops_unless_configured():

@@ -77,10 +77,11 @@ def test_a_walker_pushed_round_a_corner_walks_round_it_and_leaves(clearance_m, l
 
 @pytest.mark.parametrize("scenario", ["crossing", "plaza"])
 def test_nobody_stays_for_minutes_in_a_scenario_crowd(scenario):
-    """The default 24-person crowd, 600 s: every group present at the end entered less than 2 minutes before
-    (a walk across takes ~15 s)."""
+    """The default 24-person crowd with the corner fix on (0.6 m), 600 s: every group present at the end entered
+    less than 2 minutes before (a walk across takes ~15 s)."""
+    social = replace(SocialForceParams(), detour_clearance_m=0.6)
     for seed in (10, 11):
-        sim = CrowdSimulator(SimConfig(scenario=scenario, n_pedestrians=24))
+        sim = CrowdSimulator(SimConfig(scenario=scenario, n_pedestrians=24, social=social))
         sim.reset(seed)
         for _ in range(1500):
             sim.step()
