@@ -160,7 +160,7 @@ def _small(argv: list[str], shared: Path, tmp_path: Path) -> list[str] | None:
             out += ["--envs", "2", "--n-steps", "128", "--batch-size", "64", "--n-epochs", "1", "--eval-episodes", "1",
                     "--eval-every-steps", "256", "--demo-episodes", "1", "--dagger-rounds", "1", "--dagger-episodes",
                     "1", "--bc-epochs", "1", "--demo-policy", "mpc-cv"]
-    if argv[:2] == ["crowdnav", "bounds"]:  # the smoke suite's invisible-robot cell (8 s episodes)
+    if argv[:2] == ["crowdnav", "bounds"]:  # the smoke suite's invisible-robot cell (16 s episodes)
         out[out.index("--suite") + 1] = "smoke"
         out = [*out[:out.index("--cells")], *out[out.index("--cells") + 2:]] if "--cells" in out else out
         out += ["--cells", "circle-low-invisible", "--no-progress"]
