@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -22,6 +23,15 @@ from crowdsim.generate import (
 )
 from crowdsim.presets import PRESETS, get_preset, sample_config
 from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS
+
+
+def console_script(name: str) -> str:
+    """How the user's shell reaches this install's console script `name` (e.g. rerun): the bare name when it is on
+    PATH, else its path beside this Python (a virtual environment that is not activated: `.venv/bin/rerun`)."""
+    if shutil.which(name):
+        return name
+    beside = Path(sys.executable).parent / name
+    return str(beside) if beside.is_file() else name
 
 
 def _options(pairs: list[str]) -> tuple[tuple[str, float], ...]:
@@ -230,7 +240,7 @@ def _run(args: argparse.Namespace) -> int:
     paths = generate(config, RunSpec(duration_s=60.0, seed=0), args.out, name="plaza_demo", rrd=True,
                      progress=True)
     print(_summary(paths))
-    print(f"rerun recording: {paths['rrd']}  (view with: rerun {paths['rrd']})")
+    print(f"rerun recording: {paths['rrd']}  (view with: {console_script('rerun')} {paths['rrd']})")
     return 0
 
 

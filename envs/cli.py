@@ -21,7 +21,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from crowdsim.cli import OneLineParser, show_defaults  # the CLI conventions, shared with crowdsim
+from crowdsim.cli import OneLineParser, console_script, show_defaults  # the CLI conventions, shared with crowdsim
 from envs.cli_options import (
     OBSERVATION_POLICIES,
     add_backend_options,
@@ -332,7 +332,7 @@ def _demo(args: argparse.Namespace) -> int:
     write_json_atomic(out / "demo.json", result)
     print(markdown_table(result))
     print(f"\nwrote {out / 'demo.json'}, {out / 'demo.md'}, {out / 'demo.png'}, {out / 'demo.rrd'} "
-          f"(view with: rerun {out / 'demo.rrd'}) in {time.perf_counter() - start:.1f} s")
+          f"(view with: {console_script('rerun')} {out / 'demo.rrd'}) in {time.perf_counter() - start:.1f} s")
     return 0
 
 
