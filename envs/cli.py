@@ -31,6 +31,7 @@ from envs.cli_options import (
     ignored_flag,
     policy_configs,
     reads_observation,
+    replay_predictors,
 )
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.evaluation.suite import DEFAULT_DATA
@@ -220,6 +221,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         readers = [*OBSERVATION_POLICIES, "sb3:PATH.zip", "module:factory policies"]  # they act on the observation
         raise ignored_flag("--wall-rays", args.policy, readers)
     config = _config(args)
+    configs, predictor_note = replay_predictors(args, configs)
     check_writable_dir(args.out)
     if args.json is not None:
         check_writable_file(args.json)
@@ -229,6 +231,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(warning, file=sys.stderr)
     for note in _group_notes(config):
         print(f"crowdnav: warning: {note}", file=sys.stderr)
+    if predictor_note is not None:
+        print(predictor_note, flush=True)
     results = []
     for pcfg in configs:
         try:

@@ -15,7 +15,7 @@ from dataclasses import fields, replace
 from typing import TYPE_CHECKING, Any
 
 from crowdsim.distributed import BACKENDS
-from envs.config import DEFAULT_PREDICTOR
+from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
@@ -193,3 +193,26 @@ def check_backend(args: argparse.Namespace) -> None:
         from envs.evaluation.pool import require_ray
 
         require_ray()
+
+
+def replay_predictors(args: argparse.Namespace, configs: list[PolicyConfig]) -> tuple[list[PolicyConfig], str | None]:
+    """For --scenario replay: each predictor policy as it runs on this recording (a known ETH/UCY test recording:
+    the scene's leave-one-out model of the reference suite's real cell, `PolicyConfig.for_cell`; a given --predictor
+    wins, `{scene}` in it is filled in), and one line saying which predictor each uses (None: nothing to say)."""
+    if args.scenario != REPLAY_SCENARIO:
+        return configs, None
+    from envs.evaluation.suite import REFERENCE_SUITE, recording_cell
+
+    cell = recording_cell(args.replay_file)
+    if cell is not None:
+        configs = [p.for_cell(cell.scene, cell.predictor) for p in configs]
+    used = ", ".join(f"{p.name} predicts with {p.predictor_used()}" for p in configs if p.predictor_used())
+    if not used:
+        return configs, None
+    name = args.replay_file.name
+    if cell is None:
+        why = "" if args.predictor else " (the default, trained on crowdsim; --predictor NAME to change it)"
+        return configs, f"crowdnav: {name} is no known ETH/UCY test recording: {used}{why}"
+    why = "" if args.predictor else f" (the scene's leave-one-out model, as in {REFERENCE_SUITE}'s {cell.name}; " \
+        "--predictor NAME overrides)"
+    return configs, f"crowdnav: {name} is ETH/UCY scene {cell.scene}'s test recording: {used}{why}"

@@ -221,6 +221,18 @@ def _planner_defaults(spec: Any, origin: str) -> tuple[int | None, tuple[tuple[s
     return replan, tuple(sorted(mpc.items()))
 
 
+REFERENCE_SUITE = "crowdnav-v1"  # its real cells say which scene, and so which predictor, each test recording has
+
+
+def recording_cell(path: Path | str, suite: str = REFERENCE_SUITE) -> Cell | None:
+    """The real cell of the shipped `suite` that replays the recording `path` (matched by file name: the ETH/UCY
+    test files' names are unique, e.g. biwi_hotel.txt), None for any other file. Its `scene` and `predictor` are
+    what `crowdnav evaluate --scenario replay` gives mpc-gpgraph there (`PolicyConfig.for_cell`), as the suite does."""
+    name = Path(path).name
+    return next((c for c in load_suite(suite).cells if c.is_real and name in {Path(f).name for f in c.spec["replay"]}),
+                None)
+
+
 def load_suite(name: str) -> Suite:
     """A shipped suite by name (`suite_names()`); unknown names raise listing the valid ones."""
     if name not in suite_names():

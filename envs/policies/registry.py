@@ -126,6 +126,13 @@ class PolicyConfig:
             return replace(self, predictor=cell_predictor)
         return self
 
+    def predictor_used(self) -> str | None:
+        """The predictor this policy runs: the one given, else the shipped `DEFAULT_PREDICTOR` for the predictor
+        policies (`PREDICTOR_POLICIES`); None for a policy that runs none (a plug-in given none chooses its own)."""
+        if self.predictor is not None:
+            return self.predictor
+        return DEFAULT_PREDICTOR if split_wrappers(self.name)[0] in PREDICTOR_POLICIES else None
+
     def to_json(self) -> dict[str, Any]:
         """The whole config as JSON-ready data (goes into every results file)."""
         return _json_safe(asdict(self))

@@ -358,3 +358,26 @@ def test_in_the_smoke_suite_mpc_cv_reaches_its_goal(tmp_path):
     board = run_benchmark(suite, cells, [PolicyConfig("mpc-cv")], tmp_path, workers=1, progress=False)
     res = board["pooled"]["synthetic"]["mpc-cv"]
     assert res["completed"] == 4 and res["success_rate"] > 0 and res["spl"] > 0
+
+
+def test_a_known_test_recording_maps_to_its_suite_cell_and_every_leaderboard_names_its_predictors():
+    """`recording_cell` is crowdnav-v1's own mapping (file -> real cell -> scene, leave-one-out predictor), and the
+    leaderboard (json and md) names each policy's predictor per cell, the shipped default included."""
+    from envs.config import DEFAULT_PREDICTOR
+    from envs.evaluation.leaderboard import leaderboard, leaderboard_markdown
+    from envs.evaluation.suite import recording_cell
+
+    v1 = load_suite("crowdnav-v1")
+    for cell in (c for c in v1.cells if c.is_real):
+        for f in cell.spec["replay"]:
+            assert recording_cell(f"/anywhere/{f}") == cell
+    assert recording_cell("eth_ucy/univ/test/students003.txt").predictor == "gpgraph-stgcnn-univ+coherent-motion"
+    assert recording_cell("eth_ucy/hotel/train/biwi_eth_train.txt") is None and recording_cell("notes.txt") is None
+    smoke = load_suite("smoke")
+    board = leaderboard(smoke, list(smoke.cells), [PolicyConfig("mpc-gpgraph"), PolicyConfig("mpc-cv")], [])
+    assert board["cells"]["real-hotel"]["predictors"] == {"mpc-gpgraph": "gpgraph-stgcnn-hotel+coherent-motion"}
+    assert board["cells"]["corridor-low-visible"]["predictors"] == {"mpc-gpgraph": DEFAULT_PREDICTOR}
+    assert (f"Predictors: mpc-gpgraph: `{DEFAULT_PREDICTOR}` (corridor-low-visible, circle-low-invisible); "
+            "`gpgraph-stgcnn-hotel+coherent-motion` (real-hotel).") in leaderboard_markdown(board)
+    alone = leaderboard(smoke, list(smoke.cells), [PolicyConfig("mpc-cv")], [])
+    assert "Predictors: none of these policies runs one." in leaderboard_markdown(alone)
