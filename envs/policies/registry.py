@@ -50,6 +50,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from crowdsim.names import did_you_mean
 from envs.config import DEFAULT_PREDICTOR
 from envs.env import CrowdNavEnv
 from envs.factories import is_plugin, load_factory
@@ -107,7 +108,8 @@ class PolicyConfig:
         base, _ = split_wrappers(self.name)
         plug = is_plugin(base) or base.startswith(SB3_PREFIX)
         if not plug and base not in POLICIES:
-            raise ValueError(f"unknown policy {self.name!r}; valid names: {', '.join(POLICIES)}, "
+            raise ValueError(f"unknown policy {self.name!r};{did_you_mean(base, POLICIES)} valid names: "
+                             f"{', '.join(POLICIES)}, "
                              f"module:factory or sb3:PATH.zip, each optionally followed by {ROUTE_SUFFIX} and/or "
                              f"{SHIELD_SUFFIX}")
         if self.predictor is not None and not (base in PREDICTOR_POLICIES or is_plugin(base)):

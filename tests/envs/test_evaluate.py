@@ -215,14 +215,14 @@ TINY = ["--episodes", "1", "--workers", "1", "--record", "0", "--no-progress", "
     (["--policy", "mpc-cv", "--samples", "20"], "--samples is ignored"),  # given, even at its default value
     (["--policy", "mpc-cv", "--wall-rays", "8"], "--wall-rays is ignored by mpc-cv"),
     (["--policy", "random", "--backend", "ray", "--address", "auto", "--workers", "3"], "--workers is ignored"),
-    (["--policy", "mpc-cv", "--mpc", "safety_margin=0.5"], "FIELD one of"),
+    (["--policy", "mpc-cv", "--mpc", "safety_margin=0.5"], "field 'safety_margin'; did you mean 'safety_margin_m'?"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=wide"], "not a float"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=-1"], "safety_margin_m"),
     (["--policy", "mpc-cv", "--mpc", "route=shortest"], "route is one of none, default"),
     (["--policy", "mpc-cv", "--mpc", "wall_margin_m=-0.1"], "wall_margin_m"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=none"], "not a float"),  # not optional
     (["--policy", "mpc-cv", "mpc-cv"], "named twice"),
-    (["--policy", "mpc-gpgraph", "--samples", "0"], "n_samples"),
+    (["--policy", "mpc-gpgraph", "--samples", "0"], "--samples must be >= 1, got 0"),
     (["--policy", "random", "--address", "auto"], "--address needs --backend ray"),
     (["--policy", "random", "--invisible", "--scenario", "replay", "--replay-file", "x.txt"], "do not apply"),
     (["--policy", "random", "--frame-step", "0.6"], "need --scenario replay"),
