@@ -222,3 +222,23 @@ def test_help_shows_every_default(build):
         for a in options:
             assert f"{a.option_strings[-1]}" in text and "(default: " in text.split(a.option_strings[-1], 1)[1], \
                 (name, a.option_strings)
+
+
+def test_os_errors_name_their_flag_and_both_copies_of_the_helpers_agree():
+    """crowdsim.names and predictor.names (the packages do not import each other) say the same things."""
+    from pathlib import Path
+
+    import crowdsim.names as a
+    import predictor.names as b
+
+    missing = FileNotFoundError(2, "No such file or directory", "data/x.txt")
+    flags = {"--out": Path("o"), "--merge": [Path("m.jsonl"), Path("data/x.txt")], "--episodes": 3}
+    for names in (a, b):
+        assert names.os_error_line(missing, flags) == "--merge data/x.txt: no such file or directory"
+        assert names.os_error_line(missing, {}) == "data/x.txt: no such file or directory"
+        assert names.os_error_line(FileNotFoundError("no such data folder: o"), flags) == \
+            "--out: no such data folder: o"
+        assert names.unknown_name("policy", "rndom", ["random", "orca"]) == \
+            "unknown policy 'rndom'; did you mean 'random'? valid names: random, orca"
+        assert names.did_you_mean("zzz", ["random"]) == "" and names.closest("--epi", ["--help", "--episodes"]) == \
+            "--episodes"
