@@ -29,10 +29,10 @@ def did_you_mean(name: str, valid: Iterable[str]) -> str:
     return f" did you mean {found!r}?" if found else ""
 
 
-def unknown_name(kind: str, name: str, valid: Iterable[str], also: str = "", label: str = "valid names") -> str:
-    """"unknown KIND 'NAME'; did you mean 'X'? valid names: A, B[ALSO]" (the question only when one is close)."""
+def unknown_name(kind: str, name: str, valid: Iterable[str], label: str = "valid names") -> str:
+    """"unknown KIND 'NAME'; did you mean 'X'? valid names: A, B" (the question only when one is close)."""
     valid = [str(v) for v in valid]
-    return f"unknown {kind} {name!r};{did_you_mean(name, valid)} {label}: {', '.join(valid)}{also}"
+    return f"unknown {kind} {name!r};{did_you_mean(name, valid)} {label}: {', '.join(valid)}"
 
 
 def os_error_line(exc: OSError, flags: dict[str, object]) -> str:
