@@ -21,6 +21,7 @@ $(STAMP): pyproject.toml Makefile
 # metrics (demo.json/.md), demo.png and a rerun recording demo.rrd to out/demo.
 demo: setup
 	$(VENV)/bin/crowdnav demo --out out/demo
+	@echo "The console scripts (crowdsim, gpgraph, crowdnav, rerun) are in $(VENV)/bin: run 'source $(VENV)/bin/activate' first (README, A tour in five commands)."
 
 # The crowd simulator alone: simulate a grouped crowd, export the dataset and a rerun recording.
 demo-crowd: setup

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -20,8 +21,18 @@ from crowdsim.generate import (
     generate,
     make_dataset,
 )
+from crowdsim.names import long_options, parser_hint, unknown_name
 from crowdsim.presets import PRESETS, get_preset, sample_config
 from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS
+
+
+def console_script(name: str) -> str:
+    """How the user's shell reaches this install's console script `name` (e.g. rerun): the bare name when it is on
+    PATH, else its path beside this Python (a virtual environment that is not activated: `.venv/bin/rerun`)."""
+    if shutil.which(name):
+        return name
+    beside = Path(sys.executable).parent / name
+    return str(beside) if beside.is_file() else name
 
 
 def _options(pairs: list[str]) -> tuple[tuple[str, float], ...]:
@@ -42,7 +53,7 @@ def _options(pairs: list[str]) -> tuple[tuple[str, float], ...]:
 def _config(args: argparse.Namespace, scenario: str) -> SimConfig:
     """The SimConfig of the flags (ValueError naming the bad flag: unknown scenario or option, bad values)."""
     if scenario not in SCENARIOS:
-        raise ValueError(f"unknown scenario {scenario!r}; valid names: {', '.join(sorted(SCENARIOS))}")
+        raise ValueError(unknown_name("scenario", scenario, sorted(SCENARIOS)))
     if args.pedestrians < 1:
         raise ValueError(f"--pedestrians must be >= 1, got {args.pedestrians}")
     if args.seed < 0:
@@ -109,8 +120,13 @@ class OneLineParser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self.typed = list(sys.argv[1:] if args is None else args)  # what error() compares with the valid flags
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        hint = parser_hint(message, long_options(self), getattr(self, "typed", ()))
+        self.exit(2, f"{self.prog}: error: {hint}\n")
 
 
 def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -230,7 +246,7 @@ def _run(args: argparse.Namespace) -> int:
     paths = generate(config, RunSpec(duration_s=60.0, seed=0), args.out, name="plaza_demo", rrd=True,
                      progress=True)
     print(_summary(paths))
-    print(f"rerun recording: {paths['rrd']}  (view with: rerun {paths['rrd']})")
+    print(f"rerun recording: {paths['rrd']}  (view with: {console_script('rerun')} {paths['rrd']})")
     return 0
 
 

@@ -22,6 +22,8 @@ from multiprocessing.context import BaseContext
 from types import ModuleType
 from typing import Any, TypeVar
 
+from crowdsim.names import unknown_name
+
 BACKENDS = ("local", "ray")  # where independent tasks run: this machine's processes, or Ray tasks
 RAY_MISSING = "--backend ray needs the 'ray' extra (pip install ray)"
 
@@ -32,7 +34,7 @@ R = TypeVar("R")
 def check_backend(backend: str) -> None:
     """ValueError naming the valid backends unless `backend` is one of `BACKENDS`."""
     if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid names: {', '.join(BACKENDS)}")
+        raise ValueError(unknown_name("backend", backend, BACKENDS))
 
 
 class RayUnavailableError(ImportError):

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from crowdsim.config import BehaviourConfig, GroupConfig, SimConfig, SocialForceParams
+from crowdsim.names import unknown_name
 
 Range = tuple[float, float]
 
@@ -84,7 +85,7 @@ PRESETS: dict[str, Preset] = {REALISTIC_V1.name: REALISTIC_V1}
 
 def get_preset(name: str) -> Preset:
     if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; valid names: {', '.join(sorted(PRESETS))}")
+        raise ValueError(unknown_name("preset", name, sorted(PRESETS)))
     return PRESETS[name]
 
 

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from crowdsim.names import did_you_mean, unknown_name
+
 Rect = tuple[float, float, float, float]  # xmin, ymin, xmax, ymax in metres
 
 
@@ -244,11 +246,12 @@ def check_options(name: str, options: Mapping[str, float]) -> None:
     """Raise ValueError for an unknown scenario, an option it does not read (listing the valid ones) or a value
     out of range (lengths > 0, density >= 0, flags 0 or 1, everything finite)."""
     if name not in SCENARIOS:
-        raise ValueError(f"unknown scenario {name!r}; valid names: {', '.join(sorted(SCENARIOS))}")
+        raise ValueError(unknown_name("scenario", name, sorted(SCENARIOS)))
     valid = SCENARIO_OPTIONS[name]
     for key, value in options.items():
         if key not in valid:
-            raise ValueError(f"scenario {name!r} has no option {key!r}; valid options: {', '.join(valid)}")
+            raise ValueError(f"scenario {name!r} has no option {key!r};{did_you_mean(key, valid)} valid options: "
+                             f"{', '.join(valid)}")
         value = float(value)
         if not np.isfinite(value):
             raise ValueError(f"scenario option {key} must be finite, got {value!r}")

@@ -21,16 +21,20 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from crowdsim.cli import OneLineParser, show_defaults  # the CLI conventions, shared with crowdsim
+from crowdsim.cli import OneLineParser, console_script, show_defaults  # the CLI conventions, shared with crowdsim
+from crowdsim.names import flag_values, os_error_line, unknown_name
 from envs.cli_options import (
     OBSERVATION_POLICIES,
     add_backend_options,
     add_policy_options,
     check_backend,
+    check_env_flags,
+    check_input_files,
     default_workers,
     ignored_flag,
     policy_configs,
     reads_observation,
+    replay_predictors,
 )
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.evaluation.suite import DEFAULT_DATA
@@ -141,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _config(args: argparse.Namespace) -> CrowdNavConfig:
     if args.scenario not in scenario_names():
-        raise UsageError(f"unknown scenario {args.scenario!r}; valid names: {', '.join(scenario_names())}")
+        raise UsageError(unknown_name("scenario", args.scenario, scenario_names()))
     replay = args.scenario == REPLAY_SCENARIO
     kw: dict[str, Any] = {"scenario": args.scenario}
     if replay:
@@ -153,6 +157,7 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
 
         if args.group_overlaps is not None and args.groups_file is None:
             raise UsageError("--group-overlaps needs --groups-file")
+        check_input_files(args)
         kw["replay"] = ReplayConfig(path=args.replay_file, groups_path=args.groups_file, frame_step_s=args.frame_step,
                                     group_overlaps=args.group_overlaps or "error")
     elif args.replay_file is not None or args.groups_file is not None or args.frame_step is not None \
@@ -215,11 +220,13 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.episodes < 1 or args.seed < 0 or args.record < 0:
         raise UsageError("--episodes must be >= 1, --seed and --record >= 0")
     check_backend(args)
+    check_env_flags(args)
     configs = policy_configs(args)
     if args.wall_rays is not None and not any(reads_observation(n) for n in args.policy):
         readers = [*OBSERVATION_POLICIES, "sb3:PATH.zip", "module:factory policies"]  # they act on the observation
         raise ignored_flag("--wall-rays", args.policy, readers)
     config = _config(args)
+    configs, predictor_note = replay_predictors(args, configs)
     check_writable_dir(args.out)
     if args.json is not None:
         check_writable_file(args.json)
@@ -229,6 +236,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(warning, file=sys.stderr)
     for note in _group_notes(config):
         print(f"crowdnav: warning: {note}", file=sys.stderr)
+    if predictor_note is not None:
+        print(predictor_note, flush=True)
     results = []
     for pcfg in configs:
         try:
@@ -294,7 +303,11 @@ def _bounds(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
-    config = ReachConfig(cells_per_step=args.cells_per_step, optimistic_dt_s=args.optimistic_dt)
+    try:
+        config = ReachConfig(cells_per_step=args.cells_per_step, optimistic_dt_s=args.optimistic_dt)
+    except ValueError as exc:  # its fields, named as the flags that set them
+        raise UsageError(str(exc).replace("cells_per_step", "--cells-per-step").replace("optimistic_dt_s",
+                                                                                          "--optimistic-dt")) from None
     suite = load_suite(args.suite)
     cells = suite.select(args.cells.split(",") if args.cells else None)
     summary = run_bounds(suite, cells, args.out, config=config, data=args.data, workers=args.workers,
@@ -332,7 +345,7 @@ def _demo(args: argparse.Namespace) -> int:
     write_json_atomic(out / "demo.json", result)
     print(markdown_table(result))
     print(f"\nwrote {out / 'demo.json'}, {out / 'demo.md'}, {out / 'demo.png'}, {out / 'demo.rrd'} "
-          f"(view with: rerun {out / 'demo.rrd'}) in {time.perf_counter() - start:.1f} s")
+          f"(view with: {console_script('rerun')} {out / 'demo.rrd'}) in {time.perf_counter() - start:.1f} s")
     return 0
 
 
@@ -369,7 +382,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return run(args) if run is not None else _list(args.command)
     except (UsageError, ValueError, OSError) as exc:
-        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        message = os_error_line(exc, flag_values(args)) if isinstance(exc, OSError) else \
+            str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"crowdnav: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C: one line saying what was kept (evaluate/benchmark), exit 130

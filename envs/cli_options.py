@@ -10,12 +10,14 @@ their defaults, and their results say so); a flag that none of the chosen polici
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from dataclasses import fields, replace
 from typing import TYPE_CHECKING, Any
 
 from crowdsim.distributed import BACKENDS
-from envs.config import DEFAULT_PREDICTOR
+from crowdsim.names import unknown_name
+from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
@@ -119,6 +121,8 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     for item in items:
         key, sep, text = item.partition("=")
         if not sep or key not in valid:
+            if sep:
+                raise ValueError(unknown_name("--mpc field", key, valid))
             raise ValueError(f"--mpc {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(valid)}")
         out[key] = _mpc_value(item, key, text, "None" in str(valid[key].type))
     return out
@@ -170,6 +174,9 @@ def policy_configs(args: argparse.Namespace, suite: Suite | None = None) -> list
     values = {"--predictor": args.predictor, "--samples": args.samples, "--replan-every": args.replan_every,
               "--threads": args.threads, "--mpc": args.mpc}
     chosen = {flag: value for flag, value in values.items() if given(value)}
+    for flag in ("--samples", "--replan-every", "--threads"):
+        if flag in chosen and chosen[flag] < 1:
+            raise ValueError(f"{flag} must be >= 1, got {chosen[flag]}")
     for flag in chosen:
         if not any(flag in flags_read(n) for n in args.policy):
             raise ignored_flag(flag, args.policy, _readers(flag))
@@ -193,3 +200,44 @@ def check_backend(args: argparse.Namespace) -> None:
         from envs.evaluation.pool import require_ray
 
         require_ray()
+
+
+def replay_predictors(args: argparse.Namespace, configs: list[PolicyConfig]) -> tuple[list[PolicyConfig], str | None]:
+    """For --scenario replay: each predictor policy as it runs on this recording (a known ETH/UCY test recording:
+    the scene's leave-one-out model of the reference suite's real cell, `PolicyConfig.for_cell`; a given --predictor
+    wins, `{scene}` in it is filled in), and one line saying which predictor each uses (None: nothing to say)."""
+    if args.scenario != REPLAY_SCENARIO:
+        return configs, None
+    from envs.evaluation.suite import REFERENCE_SUITE, recording_cell
+
+    cell = recording_cell(args.replay_file)
+    if cell is not None:
+        configs = [p.for_cell(cell.scene, cell.predictor) for p in configs]
+    used = ", ".join(f"{p.name} predicts with {p.predictor_used()}" for p in configs if p.predictor_used())
+    if not used:
+        return configs, None
+    name = args.replay_file.name
+    if cell is None:
+        why = "" if args.predictor else " (the default, trained on crowdsim; --predictor NAME to change it)"
+        return configs, f"crowdnav: {name} is no known ETH/UCY test recording: {used}{why}"
+    why = "" if args.predictor else f" (the scene's leave-one-out model, as in {REFERENCE_SUITE}'s {cell.name}; " \
+        "--predictor NAME overrides)"
+    return configs, f"crowdnav: {name} is ETH/UCY scene {cell.scene}'s test recording: {used}{why}"
+
+
+def check_env_flags(args: argparse.Namespace) -> None:
+    """`crowdnav evaluate`'s env flags in range, each error naming its flag (before a config would name its own
+    field: `--pedestrians must be >= 1, got -3`, not `n_pedestrians ...`)."""
+    for flag, value, low in (("--pedestrians", args.pedestrians, 1), ("--wall-rays", args.wall_rays, 0)):
+        if value is not None and value < low:
+            raise ValueError(f"{flag} must be >= {low}, got {value}")
+    for flag, value in (("--time-limit", args.time_limit), ("--frame-step", args.frame_step)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{flag} must be a positive finite number of seconds, got {value}")
+
+
+def check_input_files(args: argparse.Namespace) -> None:
+    """`crowdnav evaluate`'s input files there, each error naming its flag (not Python's "[Errno 2] ...")."""
+    for flag, path in (("--replay-file", args.replay_file), ("--groups-file", args.groups_file)):
+        if path is not None and not path.is_file():
+            raise ValueError(f"{flag} {path}: {'not a file' if path.exists() else 'no such file'}")

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from crowdsim import SCENARIOS, GroupConfig, SimConfig
+from crowdsim.names import unknown_name
 from envs.crowds.models import DEFAULT_CROWD_MODEL, REPLAY_SCENARIO, check_crowd_model
 from envs.crowds.orca import OrcaCrowdConfig
 from envs.timing import DEFAULT_TIMING
@@ -171,7 +172,7 @@ class CrowdNavConfig:
     def __post_init__(self) -> None:
         valid = (*sorted(SCENARIOS), REPLAY_SCENARIO)
         if self.scenario not in valid:
-            raise ValueError(f"unknown scenario {self.scenario!r}; valid names: {', '.join(valid)}")
+            raise ValueError(unknown_name("scenario", self.scenario, valid))
         if self.scenario == REPLAY_SCENARIO and self.replay is None:
             raise ValueError("scenario 'replay' needs replay=ReplayConfig(path=...)")
         if self.scenario != REPLAY_SCENARIO or self.crowd_model != DEFAULT_CROWD_MODEL:

@@ -30,6 +30,7 @@ from predictor.ethucy import STEP_S
 from predictor.files import write_atomic
 from predictor.group_rules import get_rule
 from predictor.model import GPGraph, GPGraphConfig, check_group_mode, check_group_threshold_scale
+from predictor.names import did_you_mean
 
 FORMAT = "predictor.gpgraph/1"
 META_GROUP_THRESHOLD_SCALE = "group_threshold_scale"  # optional meta key, see the module docstring
@@ -119,7 +120,8 @@ def resolve(name_or_path: str | Path) -> Path:
         return path
     found = PACKAGE_CHECKPOINTS.glob("*.safetensors") if PACKAGE_CHECKPOINTS.is_dir() else []
     names = sorted(p.stem for p in found)
-    raise CheckpointError(f"no checkpoint file or packaged name {str(name_or_path)!r}; packaged: {names}")
+    raise CheckpointError(f"no checkpoint file or packaged name {str(name_or_path)!r};"
+                          f"{did_you_mean(str(name_or_path), names)} packaged: {', '.join(names)}")
 
 
 def load_model(

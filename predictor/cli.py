@@ -42,6 +42,7 @@ from predictor.group_rules import GROUP_RULES, get_rule
 from predictor.group_validation import ABSENT_IDS
 from predictor.grouping import THRESHOLD_MODES
 from predictor.model import ASSIGNERS, GPGraph, GPGraphConfig, check_group_threshold_scale
+from predictor.names import flag_values, long_options, os_error_line, parser_hint
 from predictor.sampling import PROTOCOLS
 from predictor.train import TrainConfig, initial_weights, train
 from predictor.train_split import train_val_windows
@@ -306,8 +307,13 @@ class OneLineParser(argparse.ArgumentParser):  # the same conventions as crowdsi
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self.typed = list(sys.argv[1:] if args is None else args)  # what error() compares with the valid flags
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        hint = parser_hint(message, long_options(self), getattr(self, "typed", ()))
+        self.exit(2, f"{self.prog}: error: {hint}\n")
 
 
 def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -452,7 +458,8 @@ def _main(argv: list[str] | None) -> int:
     try:
         return args.func(args)
     except (CheckpointError, DataFormatError, FileNotFoundError, ValueError) as exc:
-        print(f"gpgraph: error: {exc}", file=sys.stderr)
+        message = os_error_line(exc, flag_values(args)) if isinstance(exc, OSError) else exc
+        print(f"gpgraph: error: {message}", file=sys.stderr)
         return 2
 
 

@@ -37,6 +37,8 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import squareform
 
+from predictor.names import unknown_name
+
 LINKAGES = ("average", "complete", "single")
 STEPS = ("last", "max", "mean")
 
@@ -224,7 +226,7 @@ def get_rule(name: str) -> GroupRule:
     try:
         return GROUP_RULES[name]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown group rule {name!r}; valid: {', '.join(GROUP_RULES)}") from None
+        raise ValueError(unknown_name("group rule", name, GROUP_RULES)) from None
 
 
 def apply_rule(rule: GroupRule, obs: np.ndarray, node_mask: np.ndarray) -> np.ndarray:

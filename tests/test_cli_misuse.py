@@ -104,8 +104,8 @@ def test_there_are_at_least_30_cases():
     assert len(CASES) >= 30 and {cli for cli, _ in CASES} == set(MAINS)
 
 
-@pytest.mark.parametrize("cli, argv", CASES, ids=[f"{c}: {a.split(' --out')[0]}" for c, a in CASES])
-def test_misuse_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, cli, argv):
+def _misuse(tmp_path, capsys, cli: str, argv: str) -> str:
+    """The one error line of a misuse, after checking: exit 2, one line on stderr, no traceback, nothing written."""
     _fixtures(tmp_path)
     before = _snapshot(tmp_path)
     try:
@@ -118,6 +118,91 @@ def test_misuse_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, cli, arg
     assert len(lines) == 1 and lines[0].startswith(cli) and "error" in lines[0], err
     assert "Traceback" not in err + out
     assert _snapshot(tmp_path) == before
+    return lines[0]
+
+
+@pytest.mark.parametrize("cli, argv", CASES, ids=[f"{c}: {a.split(' --out')[0]}" for c, a in CASES])
+def test_misuse_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, cli, argv):
+    _misuse(tmp_path, capsys, cli, argv)
+
+
+# (cli, argv, what the line must say): the flag as the user typed it (not a config field's name), the path of an OS
+# error next to its flag, and for a misspelt name the closest valid one
+SPOKEN = [
+    ("crowdnav", "evaluate --policy random --pedestrians -3 --out {tmp}/o", "--pedestrians must be >= 1, got -3"),
+    ("crowdnav", "evaluate --policy random --time-limit -3 --out {tmp}/o", "--time-limit must be"),
+    ("crowdnav", "evaluate --policy ppo-crowdnav --wall-rays -1 --out {tmp}/o", "--wall-rays must be >= 0, got -1"),
+    ("crowdnav", "evaluate --policy mpc-gpgraph --samples 0 --out {tmp}/o", "--samples must be >= 1, got 0"),
+    ("crowdnav", "evaluate --policy mpc-gpgraph --threads 0 --out {tmp}/o", "--threads must be >= 1, got 0"),
+    ("crowdnav", "evaluate --policy random --scenario replay --replay-file {tmp}/nope.txt --out {tmp}/o",
+     "--replay-file {tmp}/nope.txt: no such file"),
+    ("crowdnav", "evaluate --policy random --scenario replay --replay-file {tmp}/bad.txt --groups-file {tmp}/no.txt "
+                 "--out {tmp}/o", "--groups-file {tmp}/no.txt: no such file"),
+    ("crowdnav", "evaluate --policy mpc-cvv --out {tmp}/o", "unknown policy 'mpc-cvv'; did you mean 'mpc-cv'? valid"),
+    ("crowdnav", "evaluate --policy random --scenario plazza --out {tmp}/o", "did you mean 'plaza'? valid names"),
+    ("crowdnav", "evaluate --policy random --crowd-model orcaa --out {tmp}/o", "did you mean 'orca'?"),
+    ("crowdnav", "evaluate --policy mpc-gpgraph --predictor gpgraph-stgcnn-hotell --out {tmp}/o",
+     "did you mean 'gpgraph-stgcnn-hotel'?"),
+    ("crowdnav", "evaluate --policy mpc-gpgraph --predictor gpgraph-stgcnn-hotel+coherent-motin --out {tmp}/o",
+     "did you mean 'coherent-motion'?"),
+    ("crowdnav", "evaluate --policy mpc-cv --mpc safety_margn_m=0.3 --out {tmp}/o", "did you mean 'safety_margin_m'?"),
+    ("crowdnav", "evaluate --policy random --epi 3 --out {tmp}/o", "did you mean '--episodes'?"),
+    ("crowdnav", "evaluate --policy random --group-overlaps merg --out {tmp}/o", "did you mean 'merge'?"),
+    ("crowdnav", "benchmark --suite smok --out {tmp}/b", "unknown suite 'smok'; did you mean 'smoke'? valid names"),
+    ("crowdnav", "benchmark --suite smoke --cells corridor-low-visibl --out {tmp}/b",
+     "did you mean 'corridor-low-visible'?"),
+    ("crowdnav", "bounds --suite smoke --cells-per-step 0 --out {tmp}/b", "--cells-per-step must"),
+    ("crowdnav", "demo --predictor gpgraph-stgcnn-synthtic --out {tmp}/d", "did you mean 'gpgraph-stgcnn-synthetic'?"),
+    ("gpgraph", "predict --checkpoint gpgraph-stgcnn-hotell --history {tmp}/h.npy --out {tmp}/p.npz",
+     "did you mean 'gpgraph-stgcnn-hotel'?"),
+    ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/nope",
+     "--data: no such data folder: {tmp}/nope"),
+    ("gpgraph", "groups --groups {tmp}/nope --predictor constant-velocity", "--groups: "),
+    ("gpgraph", "evaluate --checkpoint gpgraph-stgcnn-hotel --data {tmp}/empty --protocol papr",
+     "did you mean 'paper'?"),
+    ("gpgraph", "predict --checkpont gpgraph-stgcnn-hotel --history {tmp}/h.npy --out {tmp}/p.npz",
+     "did you mean '--checkpoint'?"),
+    ("crowdsim", "generate --pedestrians -3 --out {tmp}/g", "--pedestrians must be >= 1, got -3"),
+    ("crowdsim", "generate --scenario plazza --out {tmp}/g", "unknown scenario 'plazza'; did you mean 'plaza'? valid"),
+    ("crowdsim", "generate --scenario corridor --option widht_m=8 --out {tmp}/g", "did you mean 'width_m'?"),
+    ("crowdsim", "dataset --preset realistc --out {tmp}/ds", "did you mean 'realistic-v1'?"),
+    ("crowdsim", "generate --scenaro plaza --out {tmp}/g", "did you mean '--scenario'?"),
+    ("crowdnav", "evaluate --polcy random --out {tmp}/o", "required: --policy; did you mean '--policy'?"),
+]
+
+
+@pytest.mark.parametrize("cli, argv, says", SPOKEN, ids=[f"{c}: {a.split(' --out')[0]}" for c, a, _ in SPOKEN])
+def test_misuse_speaks_in_flags_and_suggests_the_name_meant(tmp_path, capsys, cli, argv, says):
+    line = _misuse(tmp_path, capsys, cli, argv)
+    assert says.format(tmp=tmp_path) in line, line
+    assert "Errno" not in line and "n_pedestrians" not in line and "Config." not in line
+
+
+def test_the_registries_suggest_the_name_meant():
+    """Not only the CLIs: each registry's own error names the closest valid name and lists them all."""
+    from crowdsim.presets import get_preset
+    from crowdsim.scenarios import check_options
+    from envs.crowds.models import check_crowd_model
+    from envs.evaluation.suite import load_suite
+    from envs.policies import PolicyConfig
+    from predictor.checkpoint import resolve
+    from predictor.group_rules import get_rule
+
+    for call, says in ((lambda: PolicyConfig("socal-force"), "did you mean 'social-force'? valid names: mpc-gpgraph"),
+                       (lambda: PolicyConfig("MPC-CV+shield"), "did you mean 'mpc-cv'?"),
+                       (lambda: load_suite("crowdnav-v2"), "did you mean 'crowdnav-v1'? valid names: "),
+                       (lambda: load_suite("smoke").cell("real-hotl"), "did you mean 'real-hotel'?"),
+                       (lambda: get_preset("realistic-v2"), "did you mean 'realistic-v1'?"),
+                       (lambda: check_options("cooridor", {}), "did you mean 'corridor'?"),
+                       (lambda: check_crowd_model("social_force", "plaza"), "did you mean 'social-force'?"),
+                       (lambda: get_rule("proximity-lst"), "did you mean 'proximity-last'?"),
+                       (lambda: resolve("stgcnn-zra1"), "did you mean 'stgcnn-zara1'?")):
+        with pytest.raises(ValueError) as info:
+            call()
+        assert says in str(info.value), str(info.value)
+    with pytest.raises(ValueError) as info:
+        load_suite("qwerty")
+    assert "did you mean" not in str(info.value) and "valid names: crowdnav-classic" in str(info.value)
 
 
 def _options(parser: argparse.ArgumentParser):
@@ -137,3 +222,23 @@ def test_help_shows_every_default(build):
         for a in options:
             assert f"{a.option_strings[-1]}" in text and "(default: " in text.split(a.option_strings[-1], 1)[1], \
                 (name, a.option_strings)
+
+
+def test_os_errors_name_their_flag_and_both_copies_of_the_helpers_agree():
+    """crowdsim.names and predictor.names (the packages do not import each other) say the same things."""
+    from pathlib import Path
+
+    import crowdsim.names as a
+    import predictor.names as b
+
+    missing = FileNotFoundError(2, "No such file or directory", "data/x.txt")
+    flags = {"--out": Path("o"), "--merge": [Path("m.jsonl"), Path("data/x.txt")], "--episodes": 3}
+    for names in (a, b):
+        assert names.os_error_line(missing, flags) == "--merge data/x.txt: no such file or directory"
+        assert names.os_error_line(missing, {}) == "data/x.txt: no such file or directory"
+        assert names.os_error_line(FileNotFoundError("no such data folder: o"), flags) == \
+            "--out: no such data folder: o"
+        assert names.unknown_name("policy", "rndom", ["random", "orca"]) == \
+            "unknown policy 'rndom'; did you mean 'random'? valid names: random, orca"
+        assert names.did_you_mean("zzz", ["random"]) == "" and names.closest("--epi", ["--help", "--episodes"]) == \
+            "--episodes"

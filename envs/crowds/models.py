@@ -14,6 +14,8 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Protocol
 
+from crowdsim.names import unknown_name
+
 if TYPE_CHECKING:
     from crowdsim import SimConfig
 
@@ -54,7 +56,7 @@ def check_crowd_model(name: str, scenario: str) -> None:
     """ValueError (one line) for an unknown crowd model, naming the valid ones, or for ORCA in a scenario it cannot
     run (walls)."""
     if name not in CROWD_MODELS:
-        raise ValueError(f"unknown crowd model {name!r}; valid names: {', '.join(CROWD_MODELS)}")
+        raise ValueError(unknown_name("crowd model", name, CROWD_MODELS))
     if name == "orca" and scenario not in ORCA_SCENARIOS:
         raise ValueError(f"crowd model 'orca' runs only scenario {', '.join(ORCA_SCENARIOS)} (ORCA here has no "
                          f"walls), not {scenario!r}")

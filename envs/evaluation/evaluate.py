@@ -119,7 +119,8 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
 
     Ctrl-C raises `Interrupted` saying how many episodes were done (nothing of this policy is written then).
 
-    Returns the JSON-ready summary (`stats.aggregate` plus policy, policy_config, scenario, seed, config,
+    Returns the JSON-ready summary (`stats.aggregate` plus policy, predictor (the one it ran, None for a
+    policy without one), policy_config, scenario, seed, config,
     episode_list and run: workers, backend, wall time, files written).
     """
     from tqdm.auto import tqdm
@@ -153,7 +154,8 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
         raise Interrupted(f"{len(runs)} of {len(tasks)} episodes of {stem} done, not saved") from None
     wall = time.perf_counter() - start
     records = [runs[i]["record"] for i in range(len(tasks))]
-    result: dict[str, Any] = {"policy": records[0].policy, "policy_config": pcfg.to_json(),
+    result: dict[str, Any] = {"policy": records[0].policy, "predictor": pcfg.predictor_used(),
+                              "policy_config": pcfg.to_json(),
                               "scenario": config.scenario, "seed": seed, **aggregate(records),
                               "config": config_summary(config), "episode_list": episode_list(records)}
     files = []

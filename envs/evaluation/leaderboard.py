@@ -23,7 +23,17 @@ from envs.evaluation.reference import (
     bound_failure_table,
     reference_table,
 )
-from envs.evaluation.report import SOCIAL_ROWS, fmt, intrusion_text, na, pyplot, rate_errors, rate_text, save_figure
+from envs.evaluation.report import (
+    SOCIAL_ROWS,
+    fmt,
+    intrusion_text,
+    na,
+    paired_table,
+    pyplot,
+    rate_errors,
+    rate_text,
+    save_figure,
+)
 from envs.evaluation.stats import aggregate, paired_comparison
 from envs.evaluation.suite import Cell, Suite
 from envs.policies import PolicyConfig
@@ -50,7 +60,7 @@ def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig], r
         "policies": {p.name: p.to_json() for p in policies},
         "cells": {c.name: {"spec": c.spec, "seeds": [c.seeds[0], c.seeds[-1]], "results": {},
                            "predictors": {p.name: pred for p in policies
-                                          if (pred := p.for_cell(c.scene, c.predictor).predictor) is not None}}
+                                          if (pred := p.for_cell(c.scene, c.predictor).predictor_used())}}
                   for c in cells},
         "pooled": {}, "paired": {},
     }
@@ -140,56 +150,30 @@ def _social(board: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
-def _diff(d: dict[str, Any] | None) -> str:
-    """A paired mean difference with its 95% interval, `*` when the interval excludes 0; "n.t." (not tested, no
-    interval) below `stats.MIN_BOOTSTRAP_PAIRS` pairs."""
-    if not d:
-        return "–"
-    if not d["tested"]:
-        return f"{d['mean_diff']:+.2f} ({d['pairs']} pairs) n.t."
-    return f"{d['mean_diff']:+.2f} [{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]{' *' if d['significant'] else ''}"
-
-
-def _untested(c: dict[str, Any]) -> bool:
-    """Whether any test of the comparison `c` was not made (too few pairs)."""
-    return any(isinstance(e, dict) and e.get("tested") is False for e in c.values())
-
-
-def _paired(board: dict[str, Any]) -> list[str]:
-    lines = ["### Paired comparisons (same episodes; exact McNemar, two-sided, alpha 0.05)", "",
-             "| pool | A vs B | pairs | collisions A/B (A only, B only) | p | avoidable A/B | p | "
-             "successes A/B | p | group intrusions A/B | p | path A-B (m) [95% CI] | min distance A-B (m) [95% CI] |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for pool, comps in board["paired"].items():
-        for c in comps:
-            def cnt(k: str, c: dict[str, Any] = c) -> str:
-                e = c[k]
-                p = f"{e['p_value']:.3g}{' *' if e['significant'] else ''}" if e["tested"] else "n.t."
-                return f"{e['a']}/{e['b']} ({e['a_only']}, {e['b_only']}) | {p}"
-            lines.append(f"| {pool} | {c['policy_a']} vs {c['policy_b']} | {c['pairs']} | {cnt('collision')} | "
-                         f"{cnt('avoidable_collision')} | {cnt('success')} | {cnt('group_intrusion')} | "
-                         f"{_diff(c.get('path_length_m'))} | {_diff(c.get('min_distance_m'))} |")
-    lines.append("")
-    lines.append("`*`: significant at alpha = 0.05 (no correction for the number of comparisons).")
-    untested = [c for comps in board["paired"].values() for c in comps if _untested(c)]
-    if untested:
-        c = untested[0]
-        lines.append(f"n.t.: not tested, too few pairs: a McNemar test needs at least {c['min_discordant_pairs']} "
-                     "discordant pairs (with fewer no p below 0.05 is possible), a paired bootstrap at least "
-                     f"{c['min_bootstrap_pairs']} pairs (with fewer its interval is too narrow: at 2 pairs it "
-                     "excludes 0 for about half of all differences that are really 0).")
-    return [*lines, ""]
-
-
 def leaderboard_markdown(board: dict[str, Any]) -> str:
     """The leaderboard as markdown: pooled summary, collision and success matrices, social-navigation metrics,
     paired comparisons."""
-    head = [f"## Leaderboard: suite {board['suite']} v{board['version']}", "", board["description"], ""]
+    head = [f"## Leaderboard: suite {board['suite']} v{board['version']}", "", board["description"], "",
+            *_predictors(board)]
     body = (_summary(board) + _matrix(board, "collision_rate", "Collision rate [95% Wilson CI]")
             + _matrix(board, "avoidable_collision_rate", "Avoidable collision rate (robot or pedestrian at fault)")
             + _matrix(board, "success_rate", "Success rate [95% Wilson CI]") + _social(board) + reference_table(board)
-            + _bounds(board) + _paired(board))
+            + _bounds(board) + paired_table(board["paired"]))
     return "\n".join(head + body)
+
+
+def _predictors(board: dict[str, Any]) -> list[str]:
+    """One line naming the predictor of each policy that runs one, with the cells where it ran it."""
+    used: dict[str, dict[str, list[str]]] = {}
+    for cell, entry in board["cells"].items():
+        for name, pred in entry.get("predictors", {}).items():
+            used.setdefault(name, {}).setdefault(pred, []).append(cell)
+    if not used:
+        return ["Predictors: none of these policies runs one.", ""]
+    every = set(board["cells"])
+    parts = [f"{name}: " + "; ".join(f"`{pred}`" + ("" if set(cells) == every else f" ({', '.join(cells)})")
+                                     for pred, cells in by.items()) for name, by in used.items()]
+    return ["Predictors: " + " · ".join(parts) + ".", ""]
 
 
 def _bounds(board: dict[str, Any]) -> list[str]:

@@ -1,12 +1,14 @@
 """Report files of evaluations: markdown tables, PNG plots. Everything is written atomically (`envs.atomic`).
 
 `markdown_table(result)` and `plot_result(result, scenes, path)` describe one policy's evaluation;
-`compare(results)`, `compare_png(results, path)` and `compare_json(results)` put several side by side. The
+`compare(results)`, `compare_png(results, path)` and `compare_json(results)` put several side by side, with
+their paired tests on the same episodes (`paired_comparisons`, `paired_table`, shared with the leaderboard). The
 benchmark's leaderboard has its own module (`envs.evaluation.leaderboard`).
 """
 
 from __future__ import annotations
 
+from itertools import combinations
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +16,8 @@ import numpy as np
 
 from envs.atomic import write_atomic
 from envs.config import REPLAY_SCENARIO
+from envs.evaluation.records import EpisodeRecord
+from envs.evaluation.stats import paired_comparison
 from envs.scoring.social_metrics import ZONES
 
 N_DRAWN = 3  # episodes drawn in the trajectories panel of the PNG
@@ -103,9 +107,18 @@ def describe_config(result: dict[str, Any]) -> str:
             f"dt {c.get('dt_s')} s, {seeds}")
 
 
+def predictor_text(result: dict[str, Any]) -> str:
+    """The predictor a result's policy ran ("none" for a policy without one; "?" for results written before
+    results named it)."""
+    if "predictor" not in result:
+        return "?"
+    return result["predictor"] or "none"
+
+
 def markdown_table(result: dict[str, Any]) -> str:
     """A markdown table of one policy's summary."""
     rows = [
+        ("predictor", predictor_text(result)),
         ("episodes", str(result["episodes"])),
         ("success rate [95% CI]", rate_text(result, "success_rate")),
         ("collision rate [95% CI]", rate_text(result, "collision_rate")),
@@ -159,15 +172,71 @@ COMPARE_COLUMNS = (
 )
 
 
+def paired_comparisons(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every two of the evaluated policies `results` (each with its `episode_list`) on the episodes both completed,
+    matched by seed, so the same crowd and route (`stats.paired_comparison`: exact McNemar, paired bootstrap)."""
+    recs = [[EpisodeRecord.from_json(e) for e in r.get("episode_list", [])] for r in results]
+    return [paired_comparison(a, b) for a, b in combinations(recs, 2) if a and b]
+
+
 def compare(results: list[dict[str, Any]]) -> str:
-    """One markdown table, a row per policy, the key metrics as columns (config line from the first)."""
+    """One markdown table, a row per policy, the key metrics as columns (config line from the first); with two
+    or more policies, then their paired comparisons on the same episodes (`paired_comparisons`, `paired_table`)."""
     if not results:
         raise ValueError("nothing to compare")
-    header = "| policy | episodes | " + " | ".join(name for name, _ in COMPARE_COLUMNS) + " |"
-    lines = [describe_config(results[0]), "", header, "|" + "---|" * (len(COMPARE_COLUMNS) + 2)]
+    header = "| policy | predictor | episodes | " + " | ".join(name for name, _ in COMPARE_COLUMNS) + " |"
+    lines = [describe_config(results[0]), "", header, "|" + "---|" * (len(COMPARE_COLUMNS) + 3)]
     for r in results:
-        lines.append(f"| {r['policy']} | {r['episodes']} | " + " | ".join(f(r) for _, f in COMPARE_COLUMNS) + " |")
+        lines.append(f"| {r['policy']} | {predictor_text(r)} | {r['episodes']} | "
+                     + " | ".join(f(r) for _, f in COMPARE_COLUMNS) + " |")
+    paired = paired_comparisons(results)
+    if paired:
+        lines += ["", *paired_table({str(results[0].get("scenario", "all")): paired})]
     return "\n".join(lines)
+
+
+def _diff(d: dict[str, Any] | None) -> str:
+    """A paired mean difference with its 95% interval, `*` when the interval excludes 0; "n.t." (not tested, no
+    interval) below `stats.MIN_BOOTSTRAP_PAIRS` pairs."""
+    if not d:
+        return "–"
+    if not d["tested"]:
+        return f"{d['mean_diff']:+.2f} ({d['pairs']} pairs) n.t."
+    return f"{d['mean_diff']:+.2f} [{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]{' *' if d['significant'] else ''}"
+
+
+def _untested(c: dict[str, Any]) -> bool:
+    """Whether any test of the comparison `c` was not made (too few pairs)."""
+    return any(isinstance(e, dict) and e.get("tested") is False for e in c.values())
+
+
+def paired_table(paired: dict[str, list[dict[str, Any]]]) -> list[str]:
+    """Markdown rows of paired comparisons (`stats.paired_comparison`) per pool: counts, discordant pairs and exact
+    McNemar p of collisions, avoidable collisions, successes and group intrusions; paired differences of path
+    length and minimum distance; what "*" and "n.t." mean."""
+    lines = ["### Paired comparisons (same episodes; exact McNemar, two-sided, alpha 0.05)", "",
+             "| pool | A vs B | pairs | collisions A/B (A only, B only) | p | avoidable A/B | p | "
+             "successes A/B | p | group intrusions A/B | p | path A-B (m) [95% CI] | min distance A-B (m) [95% CI] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for pool, comps in paired.items():
+        for c in comps:
+            def cnt(k: str, c: dict[str, Any] = c) -> str:
+                e = c[k]
+                p = f"{e['p_value']:.3g}{' *' if e['significant'] else ''}" if e["tested"] else "n.t."
+                return f"{e['a']}/{e['b']} ({e['a_only']}, {e['b_only']}) | {p}"
+            lines.append(f"| {pool} | {c['policy_a']} vs {c['policy_b']} | {c['pairs']} | {cnt('collision')} | "
+                         f"{cnt('avoidable_collision')} | {cnt('success')} | {cnt('group_intrusion')} | "
+                         f"{_diff(c.get('path_length_m'))} | {_diff(c.get('min_distance_m'))} |")
+    lines.append("")
+    lines.append("`*`: significant at alpha = 0.05 (no correction for the number of comparisons).")
+    untested = [c for comps in paired.values() for c in comps if _untested(c)]
+    if untested:
+        c = untested[0]
+        lines.append(f"n.t.: not tested, too few pairs: a McNemar test needs at least {c['min_discordant_pairs']} "
+                     "discordant pairs (with fewer no p below 0.05 is possible), a paired bootstrap at least "
+                     f"{c['min_bootstrap_pairs']} pairs (with fewer its interval is too narrow: at 2 pairs it "
+                     "excludes 0 for about half of all differences that are really 0).")
+    return [*lines, ""]
 
 
 def pyplot():
@@ -272,5 +341,8 @@ def compare_png(results: list[dict[str, Any]], path: str | Path) -> None:
 
 
 def compare_json(results: list[dict[str, Any]]) -> dict[str, Any]:
-    """The combined JSON of several policies: one entry per policy, keyed by name."""
-    return {"policies": [r["policy"] for r in results], "results": {r["policy"]: r for r in results}}
+    """The combined JSON of several policies: one entry per policy keyed by name, the predictor each ran, and the
+    paired comparisons of every two (`paired_comparisons`)."""
+    return {"policies": [r["policy"] for r in results],
+            "predictors": {r["policy"]: r.get("predictor") for r in results},
+            "results": {r["policy"]: r for r in results}, "paired": paired_comparisons(results)}

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdsim import GroupConfig
+from crowdsim.names import did_you_mean, unknown_name
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig, ObservationConfig
 from envs.crowds.orca import OrcaCrowdConfig
 from planner import CROWD_MPC, MPCConfig, RobotConfig
@@ -126,8 +127,9 @@ class Suite:
         for c in self.cells:
             if c.name == name:
                 return c
-        raise ValueError(f"unknown cell {name!r} in suite {self.name}; valid names: "
-                         + ", ".join(c.name for c in self.cells))
+        names = [c.name for c in self.cells]
+        raise ValueError(f"unknown cell {name!r} in suite {self.name};{did_you_mean(name, names)} valid names: "
+                         + ", ".join(names))
 
     def select(self, names: list[str] | None) -> list[Cell]:
         """The named cells (all when None), in suite order; unknown names raise listing the valid ones."""
@@ -221,9 +223,21 @@ def _planner_defaults(spec: Any, origin: str) -> tuple[int | None, tuple[tuple[s
     return replan, tuple(sorted(mpc.items()))
 
 
+REFERENCE_SUITE = "crowdnav-v1"  # its real cells say which scene, and so which predictor, each test recording has
+
+
+def recording_cell(path: Path | str, suite: str = REFERENCE_SUITE) -> Cell | None:
+    """The real cell of the shipped `suite` that replays the recording `path` (matched by file name: the ETH/UCY
+    test files' names are unique, e.g. biwi_hotel.txt), None for any other file. Its `scene` and `predictor` are
+    what `crowdnav evaluate --scenario replay` gives mpc-gpgraph there (`PolicyConfig.for_cell`), as the suite does."""
+    name = Path(path).name
+    return next((c for c in load_suite(suite).cells if c.is_real and name in {Path(f).name for f in c.spec["replay"]}),
+                None)
+
+
 def load_suite(name: str) -> Suite:
     """A shipped suite by name (`suite_names()`); unknown names raise listing the valid ones."""
     if name not in suite_names():
-        raise ValueError(f"unknown suite {name!r}; valid names: {', '.join(suite_names())}")
+        raise ValueError(unknown_name("suite", name, suite_names()))
     text = resources.files("envs.evaluation.suites").joinpath(f"{name}.json").read_text()
     return parse_suite(json.loads(text), f"suite {name}")

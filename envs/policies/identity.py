@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from envs.factories import is_plugin
-from envs.policies import AGENTS_DIR, DEFAULT_PREDICTOR, POLICIES, PREDICTOR_POLICIES, PolicyConfig
+from envs.policies import AGENTS_DIR, POLICIES, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX, parse_sb3
 from envs.policies.wrappers import base_name
 from predictor.checkpoints import checkpoint_file  # torch-free
@@ -27,8 +27,7 @@ def artifact_files(cfg: PolicyConfig) -> list[Path]:
     file (constant velocity, a typo) give none here; loading them fails later, with its own message."""
     cfg = replace(cfg, name=base_name(cfg.name))  # NAME+route+shield loads NAME's files
     files: list[Path | None] = []
-    predictor = cfg.predictor if cfg.predictor is not None else \
-        DEFAULT_PREDICTOR if cfg.name in PREDICTOR_POLICIES else None
+    predictor = cfg.predictor_used()
     if predictor is not None and not is_plugin(predictor):
         try:
             name = split_group_rule(predictor)[0]  # "NAME+RULE": NAME's weights (the rule is in the config)

@@ -50,6 +50,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from crowdsim.names import did_you_mean
 from envs.config import DEFAULT_PREDICTOR
 from envs.env import CrowdNavEnv
 from envs.factories import is_plugin, load_factory
@@ -107,7 +108,8 @@ class PolicyConfig:
         base, _ = split_wrappers(self.name)
         plug = is_plugin(base) or base.startswith(SB3_PREFIX)
         if not plug and base not in POLICIES:
-            raise ValueError(f"unknown policy {self.name!r}; valid names: {', '.join(POLICIES)}, "
+            raise ValueError(f"unknown policy {self.name!r};{did_you_mean(base, POLICIES)} valid names: "
+                             f"{', '.join(POLICIES)}, "
                              f"module:factory or sb3:PATH.zip, each optionally followed by {ROUTE_SUFFIX} and/or "
                              f"{SHIELD_SUFFIX}")
         if self.predictor is not None and not (base in PREDICTOR_POLICIES or is_plugin(base)):
@@ -125,6 +127,13 @@ class PolicyConfig:
         if self.predictor is None and cell_predictor is not None and self.name in PREDICTOR_POLICIES:
             return replace(self, predictor=cell_predictor)
         return self
+
+    def predictor_used(self) -> str | None:
+        """The predictor this policy runs: the one given, else the shipped `DEFAULT_PREDICTOR` for the predictor
+        policies (`PREDICTOR_POLICIES`); None for a policy that runs none (a plug-in given none chooses its own)."""
+        if self.predictor is not None:
+            return self.predictor
+        return DEFAULT_PREDICTOR if split_wrappers(self.name)[0] in PREDICTOR_POLICIES else None
 
     def to_json(self) -> dict[str, Any]:
         """The whole config as JSON-ready data (goes into every results file)."""

@@ -59,3 +59,22 @@ def test_dataset_split_folder_that_is_a_file(tmp_path, capsys, no_work):
 def test_a_writable_out_passes_and_the_probe_leaves_nothing(tmp_path):
     cli._check_out_dir(tmp_path / "new" / "deeper", cli.SPLITS)
     assert _tree(tmp_path) == []
+
+
+def test_console_script_names_the_venv_path_when_the_venv_is_not_activated(tmp_path, monkeypatch):
+    """`crowdnav demo` / `crowdsim demo` say how to view the recording: `rerun` on PATH, else the script's path
+    beside this Python (a user who ran `make demo` and has not activated .venv)."""
+    import sys
+
+    from crowdsim.cli import console_script
+
+    bindir = tmp_path / "venv" / "bin"
+    bindir.mkdir(parents=True)
+    (bindir / "rerun").write_text("#!/bin/sh\n")
+    (bindir / "rerun").chmod(0o755)
+    monkeypatch.setattr(sys, "executable", str(bindir / "python"))
+    monkeypatch.setenv("PATH", str(tmp_path / "nothing-here"))
+    assert console_script("rerun") == str(bindir / "rerun")
+    assert console_script("no-such-script") == "no-such-script"
+    monkeypatch.setenv("PATH", str(bindir))
+    assert console_script("rerun") == "rerun"

@@ -252,7 +252,7 @@ def test_cli_benchmark_runs_a_suite_and_resumes(tmp_path, capsys):
             "--out", str(tmp_path), "--workers", "1", "--no-progress"]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "Leaderboard: suite smoke v6" in out and "| corridor-low-visible |" in out
+    assert "Leaderboard: suite smoke v7" in out and "| corridor-low-visible |" in out
     assert "2 episodes run, 0 already recorded" in out
     assert len(read_records(tmp_path / RECORDS)) == 2
     assert main(args) == 0
@@ -330,3 +330,54 @@ def test_an_mpc_field_added_later_stays_out_of_the_fingerprint_at_its_default():
     assert "spacetime" not in plain and "lane" in plain  # lane predates the v7 records: it stays
     searched = policy_identity(PolicyConfig("mpc-cv", mpc=replace(ENV_MPC, spacetime=SpaceTimeConfig())))[0]["mpc"]
     assert searched["spacetime"] is not None
+
+
+def test_smoke_routes_fit_in_its_episodes():
+    """Smoke v6's 8 s episodes ended before anyone could arrive (15 m and 12 m routes at 1.2 m/s): every route of
+    every smoke episode must now be drivable at full speed within two thirds of the time limit."""
+    from envs.env import CrowdNavEnv
+    from envs.evaluation.suite import DEFAULT_DATA
+
+    suite = load_suite("smoke")
+    cells = [c for c in suite.cells if not c.is_real or all(f.is_file() for f in c.files(DEFAULT_DATA))]
+    assert len(cells) >= 2
+    for cell in cells:
+        for seed in cell.seeds:
+            env = CrowdNavEnv(cell.env_config(seed))
+            env.reset(seed=seed)
+            route_m = float(((env.goal - env.robot_state[:2]) ** 2).sum() ** 0.5)
+            assert route_m / env.config.robot.max_speed_mps < 2 / 3 * env.config.time_limit_s, (cell.name, seed)
+
+
+@pytest.mark.slow
+def test_in_the_smoke_suite_mpc_cv_reaches_its_goal(tmp_path):
+    """The smoke suite is a first look that can show a difference: mpc-cv arrives in at least one simulated
+    episode (SPL above 0), where v6 gave success 0.00 and SPL 0.000 to every policy."""
+    suite = load_suite("smoke")
+    cells = [c for c in suite.cells if not c.is_real]
+    board = run_benchmark(suite, cells, [PolicyConfig("mpc-cv")], tmp_path, workers=1, progress=False)
+    res = board["pooled"]["synthetic"]["mpc-cv"]
+    assert res["completed"] == 4 and res["success_rate"] > 0 and res["spl"] > 0
+
+
+def test_a_known_test_recording_maps_to_its_suite_cell_and_every_leaderboard_names_its_predictors():
+    """`recording_cell` is crowdnav-v1's own mapping (file -> real cell -> scene, leave-one-out predictor), and the
+    leaderboard (json and md) names each policy's predictor per cell, the shipped default included."""
+    from envs.config import DEFAULT_PREDICTOR
+    from envs.evaluation.leaderboard import leaderboard, leaderboard_markdown
+    from envs.evaluation.suite import recording_cell
+
+    v1 = load_suite("crowdnav-v1")
+    for cell in (c for c in v1.cells if c.is_real):
+        for f in cell.spec["replay"]:
+            assert recording_cell(f"/anywhere/{f}") == cell
+    assert recording_cell("eth_ucy/univ/test/students003.txt").predictor == "gpgraph-stgcnn-univ+coherent-motion"
+    assert recording_cell("eth_ucy/hotel/train/biwi_eth_train.txt") is None and recording_cell("notes.txt") is None
+    smoke = load_suite("smoke")
+    board = leaderboard(smoke, list(smoke.cells), [PolicyConfig("mpc-gpgraph"), PolicyConfig("mpc-cv")], [])
+    assert board["cells"]["real-hotel"]["predictors"] == {"mpc-gpgraph": "gpgraph-stgcnn-hotel+coherent-motion"}
+    assert board["cells"]["corridor-low-visible"]["predictors"] == {"mpc-gpgraph": DEFAULT_PREDICTOR}
+    assert (f"Predictors: mpc-gpgraph: `{DEFAULT_PREDICTOR}` (corridor-low-visible, circle-low-invisible); "
+            "`gpgraph-stgcnn-hotel+coherent-motion` (real-hotel).") in leaderboard_markdown(board)
+    alone = leaderboard(smoke, list(smoke.cells), [PolicyConfig("mpc-cv")], [])
+    assert "Predictors: none of these policies runs one." in leaderboard_markdown(alone)

@@ -57,7 +57,7 @@ def test_bad_bounds_files_are_refused(tmp_path):
 def test_cli_bounds_misuse_is_one_line(tmp_path, capsys):
     for args, needle in ((["--suite", "nope"], "valid names"),
                          (["--suite", "smoke", "--cells", "real-mars"], "valid names"),
-                         (["--suite", "smoke", "--cells-per-step", "1"], "cells_per_step"),
+                         (["--suite", "smoke", "--cells-per-step", "1"], "--cells-per-step must"),
                          (["--suite", "smoke", "--cells", "circle-low-invisible", "--optimistic-dt", "0.25"],
                           "whole multiple"),  # a synthetic cell: the check must not depend on ../shared's data
                          (["--suite", "smoke", "--workers", "0"], "--workers"),

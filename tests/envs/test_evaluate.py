@@ -16,7 +16,7 @@ from envs.evaluation.report import compare
 from envs.policies import ENV_MPC, PolicyConfig
 
 REQUIRED_KEYS = {
-    "policy", "scenario", "seed", "episodes", "config", "episode_list",
+    "policy", "predictor", "scenario", "seed", "episodes", "config", "episode_list",
     "success_rate", "collision_rate", "timeout_rate", "group_intrusion_rate", "group_intrusion_rate_success",
     "success_rate_ci95", "collision_rate_ci95", "time_to_goal_s", "time_to_goal_median_s", "path_length_m",
     "min_distance_m", "min_distance_overall_m", "discomfort_frequency", "solve_time_p50_ms", "solve_time_p95_ms",
@@ -40,9 +40,46 @@ def test_compare_table_has_a_row_per_policy():
     a = evaluate("random", SMALL, episodes=1, seed=0, record=0, progress=False)
     b = evaluate("social-force", SMALL, episodes=1, seed=0, record=0, progress=False)
     table = compare([a, b])
-    rows = [ln for ln in table.splitlines() if ln.startswith("| ")]
-    assert len(rows) == 3 and rows[1].startswith("| random |") and rows[2].startswith("| social-force |")
-    assert "plaza" in table
+    rows = [ln for ln in table.split("\n\n")[1].splitlines() if ln.startswith("| ")]
+    assert len(rows) == 3 and rows[1].startswith("| random | none |") and rows[2].startswith("| social-force | none |")
+    assert "plaza" in table and "| plaza | random vs social-force | 1 |" in table  # and the paired test
+
+
+def _result(policy, outcomes):
+    """An evaluation result of `policy` with one episode per outcome, seeds 0, 1, ... (what `compare` reads)."""
+    from envs.evaluation.records import EpisodeRecord
+    from envs.evaluation.stats import aggregate
+
+    recs = [EpisodeRecord(policy=policy, seed=s, outcome=o, collision_with="pedestrian" if o == "collision" else None,
+                          at_fault="robot" if o == "collision" else None, min_distance_m=0.5)
+            for s, o in enumerate(outcomes)]
+    return {"policy": policy, "predictor": None, "scenario": "plaza", "seed": 0, "config": {}, **aggregate(recs),
+            "episode_list": [r.to_json() for r in recs]}
+
+
+def test_comparison_has_the_exact_mcnemar_test_on_the_same_episodes():
+    """a collides in none of 10 episodes, b in 7 (seeds 0-6), both time out in seeds 7-9: 7 discordant pairs, all
+    on b's side, p = 2 / 2**7 = 0.0156 (significant); successes: none anywhere, p = 1, not tested."""
+    from envs.evaluation.report import compare_json
+
+    a = _result("mpc-a", ["success"] * 7 + ["timeout"] * 3)
+    b = _result("mpc-b", ["collision"] * 7 + ["timeout"] * 3)
+    (pair,) = compare_json([a, b])["paired"]
+    assert (pair["policy_a"], pair["policy_b"], pair["pairs"]) == ("mpc-a", "mpc-b", 10)
+    assert {k: pair["collision"][k] for k in ("a", "b", "a_only", "b_only", "tested", "significant")} == \
+        {"a": 0, "b": 7, "a_only": 0, "b_only": 7, "tested": True, "significant": True}
+    assert pair["collision"]["p_value"] == pytest.approx(2 / 2**7)
+    assert pair["success"]["a_only"] == 7 and pair["success"]["p_value"] == pytest.approx(2 / 2**7)
+    assert pair["group_intrusion"]["tested"] is False
+    table = compare([a, b])
+    assert "| plaza | mpc-a vs mpc-b | 10 | 0/7 (0, 7) | 0.0156 * | 0/7 (0, 7) | 0.0156 * | 7/0 (7, 0) | 0.0156 * |" \
+        in table
+    # the pairs are the same seeds: b's episodes in another order pair the same way; b on other seeds, no pairs
+    shuffled = {**b, "episode_list": b["episode_list"][::-1]}
+    assert compare_json([a, shuffled])["paired"] == compare_json([a, b])["paired"]
+    other = _result("mpc-c", ["collision"] * 7)
+    other["episode_list"] = [{**e, "seed": e["seed"] + 100} for e in other["episode_list"]]
+    assert compare_json([a, other])["paired"][0]["pairs"] == 0
 
 
 # ------------------------------------------------------------------------------------------ evaluate()
@@ -178,14 +215,14 @@ TINY = ["--episodes", "1", "--workers", "1", "--record", "0", "--no-progress", "
     (["--policy", "mpc-cv", "--samples", "20"], "--samples is ignored"),  # given, even at its default value
     (["--policy", "mpc-cv", "--wall-rays", "8"], "--wall-rays is ignored by mpc-cv"),
     (["--policy", "random", "--backend", "ray", "--address", "auto", "--workers", "3"], "--workers is ignored"),
-    (["--policy", "mpc-cv", "--mpc", "safety_margin=0.5"], "FIELD one of"),
+    (["--policy", "mpc-cv", "--mpc", "safety_margin=0.5"], "field 'safety_margin'; did you mean 'safety_margin_m'?"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=wide"], "not a float"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=-1"], "safety_margin_m"),
     (["--policy", "mpc-cv", "--mpc", "route=shortest"], "route is one of none, default"),
     (["--policy", "mpc-cv", "--mpc", "wall_margin_m=-0.1"], "wall_margin_m"),
     (["--policy", "mpc-cv", "--mpc", "safety_margin_m=none"], "not a float"),  # not optional
     (["--policy", "mpc-cv", "mpc-cv"], "named twice"),
-    (["--policy", "mpc-gpgraph", "--samples", "0"], "n_samples"),
+    (["--policy", "mpc-gpgraph", "--samples", "0"], "--samples must be >= 1, got 0"),
     (["--policy", "random", "--address", "auto"], "--address needs --backend ray"),
     (["--policy", "random", "--invisible", "--scenario", "replay", "--replay-file", "x.txt"], "do not apply"),
     (["--policy", "random", "--frame-step", "0.6"], "need --scenario replay"),
@@ -295,3 +332,53 @@ def test_demo_still_writes_its_one_recording(tmp_path, monkeypatch, capsys):
     assert main(["demo", "--out", str(tmp_path), "--episodes", "1", "--workers", "1", "--no-progress"]) == 0
     assert asked == [1] and [p.name for p in tmp_path.glob("*.rrd")] == ["demo.rrd"]
     assert (tmp_path / "demo.rrd").stat().st_size > 1000
+
+
+def _replay_args(*extra):
+    from envs.cli import build_parser
+
+    return build_parser().parse_args(["evaluate", "--scenario", "replay", *extra])
+
+
+def test_replay_of_a_known_test_recording_picks_the_scenes_leave_one_out_predictor():
+    """As crowdnav-v1's real cells do: mpc-gpgraph on biwi_hotel.txt predicts with the hotel leave-one-out model;
+    an explicit --predictor wins (`{scene}` filled in); an unknown file keeps the default, and the line says so."""
+    from envs.cli_options import policy_configs, replay_predictors
+    from envs.config import DEFAULT_PREDICTOR
+
+    def run(*extra):
+        args = _replay_args(*extra)
+        return replay_predictors(args, policy_configs(args))
+
+    configs, note = run("--replay-file", "d/hotel/test/biwi_hotel.txt", "--policy", "mpc-gpgraph", "mpc-cv")
+    assert [p.predictor_used() for p in configs] == ["gpgraph-stgcnn-hotel+coherent-motion", None]
+    assert "scene hotel" in note and "mpc-gpgraph predicts with gpgraph-stgcnn-hotel+coherent-motion" in note
+    assert "--predictor NAME overrides" in note
+    configs, note = run("--replay-file", "biwi_hotel.txt", "--policy", "mpc-gpgraph", "--predictor", "stgcnn-eth")
+    assert configs[0].predictor == "stgcnn-eth" and "overrides" not in note
+    configs, _ = run("--replay-file", "crowds_zara02.txt", "--policy", "mpc-gpgraph", "--predictor",
+                     "gpgraph-sgcn-{scene}")
+    assert configs[0].predictor == "gpgraph-sgcn-zara2"
+    configs, note = run("--replay-file", "my_walk.txt", "--policy", "mpc-gpgraph")
+    assert configs[0].predictor_used() == DEFAULT_PREDICTOR and "no known ETH/UCY test recording" in note
+    assert run("--replay-file", "biwi_hotel.txt", "--policy", "mpc-cv") == ([PolicyConfig("mpc-cv")], None)
+
+
+@pytest.mark.slow
+def test_cli_replay_reports_name_the_predictor(tmp_path, capsys):
+    from predictor.ethucy import DEFAULT_DATA_DIR
+
+    hotel = DEFAULT_DATA_DIR / "hotel/test/biwi_hotel.txt"
+    if not hotel.is_file():
+        pytest.skip("../shared/datasets is not here")
+    args = ["evaluate", "--policy", "mpc-gpgraph", "mpc-cv", "--scenario", "replay", "--replay-file", str(hotel),
+            "--episodes", "1", "--time-limit", "2", "--workers", "1", "--no-progress", "--out", str(tmp_path)]
+    assert main(args) == 0
+    assert "mpc-gpgraph predicts with gpgraph-stgcnn-hotel+coherent-motion" in capsys.readouterr().out
+    result = json.loads((tmp_path / "mpc-gpgraph.json").read_text())
+    assert result["predictor"] == "gpgraph-stgcnn-hotel+coherent-motion"
+    assert "| predictor | gpgraph-stgcnn-hotel+coherent-motion |" in (tmp_path / "mpc-gpgraph.md").read_text()
+    assert "| predictor | none |" in (tmp_path / "mpc-cv.md").read_text()
+    both = json.loads((tmp_path / "comparison.json").read_text())
+    assert both["predictors"] == {"mpc-gpgraph": "gpgraph-stgcnn-hotel+coherent-motion", "mpc-cv": None}
+    assert "| mpc-gpgraph | gpgraph-stgcnn-hotel+coherent-motion |" in (tmp_path / "comparison.md").read_text()

@@ -150,7 +150,7 @@ def test_the_orca_robot_takes_the_straight_line_at_v_pref_in_an_empty_scene():
 
 
 def test_bad_crowd_settings_raise_one_clear_error():
-    with pytest.raises(ValueError, match="unknown crowd model 'orcas'; valid names: social-force, orca"):
+    with pytest.raises(ValueError, match=r"unknown crowd model 'orcas'; did you mean 'orca'\? valid names: social"):
         CrowdNavConfig(crowd_model="orcas", scenario="circle_crossing")
     with pytest.raises(ValueError, match=r"only scenario circle_crossing .*walls.*'corridor'"):
         CrowdNavConfig(crowd_model="orca", scenario="corridor")
