@@ -150,9 +150,26 @@ def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_pat
     from envs.evaluation.episode import fingerprint
     plain = PolicyConfig("random")
     before = plain.to_json()
-    before["mpc"].pop("spacetime")  # added to MPCConfig later, and left out at its default (LATER_MPC_FIELDS)
+    for later in ("spacetime", "n_starts"):  # added to MPCConfig later, left out at their defaults (LATER_MPC_FIELDS)
+        before["mpc"].pop(later)
     assert episode_fingerprint(suite, cell, plain) == fingerprint(suite.name, suite.version, cell.spec,
                                                                   cell.defaults, before)
+
+
+def test_a_record_made_before_the_latest_planner_fields_still_resumes():
+    """The fingerprint of a crowdnav-v1 v7 mpc-oracle episode recorded on 2026-11-28 before MPCConfig.n_starts
+    existed (the foresight ladder's records, `--mpc time_budget_s=10`): any field added to MPCConfig later must be
+    listed in LATER_MPC_FIELDS, or every earlier record would stop resuming and merging."""
+    from dataclasses import replace as _replace
+
+    from envs.evaluation.benchmark import episode_fingerprint
+    from envs.evaluation.suite import load_suite
+    from envs.policies.registry import ENV_MPC
+
+    suite = load_suite("crowdnav-v1")
+    cell = next(c for c in suite.cells if c.name == "plaza-low-invisible")
+    pcfg = PolicyConfig("mpc-oracle", mpc=_replace(suite.mpc_config(ENV_MPC), time_budget_s=10.0))
+    assert episode_fingerprint(suite, cell, pcfg) == "a6cc028e0ee80bc8"
 
 
 def test_record_store_skips_a_partial_line_and_appends_after_it(tmp_path):
