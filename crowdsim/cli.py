@@ -184,7 +184,7 @@ def _summary(paths: dict[str, Path]) -> str:
     if "groups" in paths:
         groups = len([ln for ln in paths["groups"].read_text().splitlines() if ln.strip()])
     else:  # a TrajNet++ recording: its metadata counts them
-        groups = meta["groups"]
+        groups = meta["groups_of_two_or_more"]
     return (f"{meta['rows']} rows, {meta['pedestrians']} pedestrians, "
             f"{groups} groups of 2+ -> {paths['trajectories'].parent}")
 

@@ -228,7 +228,8 @@ def trajnet_files(name: str, table: np.ndarray, metadata: dict[str, Any]) -> Rec
     meta = dict(metadata)
     meta.update(rows=len(table), pedestrians=len(np.unique(table[:, 1])) if len(table) else 0,
                 frame_stride=FRAME_STRIDE, files=names, format="trajnet", fps=fps,
-                scenes=len(scene_windows(table, FRAME_STRIDE)), groups=len(groups_text(table).splitlines()))
+                scenes=len(scene_windows(table, FRAME_STRIDE)),
+                groups_of_two_or_more=len(groups_text(table).splitlines()))
     return {
         "trajectories": (names["trajectories"], trajnet_text(table, fps, FRAME_STRIDE)),
         "metadata": (names["metadata"], json.dumps(meta, indent=2, sort_keys=True) + "\n"),

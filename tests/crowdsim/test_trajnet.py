@@ -110,7 +110,8 @@ def test_generate_format_trajnet_writes_one_ndjson_and_the_metadata(tmp_path, ca
     got = read_trajnet(tmp_path / "corridor_n4_s0.ndjson")
     assert meta["format"] == "trajnet" and meta["rows"] == len(got.rows) and meta["scenes"] == len(got.scenes)
     assert got.labels is not None and len(got.labels) == len(got.rows)
-    assert f"{meta['rows']} rows" in capsys.readouterr().out
+    assert f"{meta['rows']} rows, {meta['pedestrians']} pedestrians, {meta['groups_of_two_or_more']} groups of 2+" \
+        in capsys.readouterr().out
 
 
 def test_dataset_format_trajnet_writes_ndjson_in_every_split(tmp_path):
@@ -128,6 +129,15 @@ def test_unknown_format_is_one_line_exit_2_and_nothing_written(tmp_path, capsys)
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "--format" in err and "trajnet" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_an_unknown_format_in_the_api_lists_the_valid_ones(tmp_path):
+    from crowdsim.config import SimConfig
+    from crowdsim.generate import RunSpec, generate
+
+    with pytest.raises(ValueError, match="unknown format 'csv'; valid: ethucy, trajnet"):
+        generate(SimConfig(scenario="corridor", n_pedestrians=6), RunSpec(duration_s=1.0), tmp_path, fmt="csv")
+    assert not any(tmp_path.iterdir())
 
 
 def test_format_defaults_to_ethucy(tmp_path):
