@@ -12,6 +12,7 @@ from typing import Any, NoReturn
 
 from crowdsim.config import GroupConfig, SimConfig
 from crowdsim.distributed import BACKENDS
+from crowdsim.export import FORMATS
 from crowdsim.files import check_writable_dir
 from crowdsim.generate import (
     SPLITS,
@@ -110,6 +111,9 @@ def _common(p: argparse.ArgumentParser, duration: float) -> None:
     p.add_argument("--merge-rate", type=float, default=_DefaultFloat(0.0), help="per-group rate (1/s) of merging")
     p.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
                    help="scenario option, e.g. width_m=5 (repeatable)")
+    p.add_argument("--format", choices=FORMATS, default="ethucy",
+                   help="ethucy: X.txt, X.groups.txt, X.labels.tsv; trajnet: one TrajNet++ X.ndjson (scenes and "
+                        "tracks, group labels as a 'group' field); X.json beside either")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -177,9 +181,12 @@ def _summary(paths: dict[str, Path]) -> str:
     """One line on what was written: the row and pedestrian counts from the recording's metadata JSON (written
     from the same table as the trajectory file, so the file itself need not be parsed again) and the groups."""
     meta = json.loads(paths["metadata"].read_text())
-    groups = [ln for ln in paths["groups"].read_text().splitlines() if ln.strip()]
+    if "groups" in paths:
+        groups = len([ln for ln in paths["groups"].read_text().splitlines() if ln.strip()])
+    else:  # a TrajNet++ recording: its metadata counts them
+        groups = meta["groups_of_two_or_more"]
     return (f"{meta['rows']} rows, {meta['pedestrians']} pedestrians, "
-            f"{len(groups)} groups of 2+ -> {paths['trajectories'].parent}")
+            f"{groups} groups of 2+ -> {paths['trajectories'].parent}")
 
 
 def _error(message: str) -> int:
@@ -234,7 +241,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "generate":
         config, spec = _config(args, args.scenario), _spec(args)
         _check_out_dir(args.out)
-        paths = generate(config, spec, args.out, rrd=args.rrd, progress=True)
+        paths = generate(config, spec, args.out, rrd=args.rrd, progress=True, fmt=args.format)
         print(_summary(paths))
         return 0
     if args.command == "dataset":
@@ -273,7 +280,7 @@ def _dataset(args: argparse.Namespace) -> int:
     _check_out_dir(args.out, SPLITS)
     try:
         out = make_dataset(args.out, scenarios, args.seeds_per_scenario, base, spec, backend=args.backend,
-                           workers=args.workers, address=args.address, preset=args.preset)
+                           workers=args.workers, address=args.address, preset=args.preset, fmt=args.format)
     except ConnectionError as exc:  # ray.init could not reach --address
         print(f"crowdsim: error: cannot connect to Ray at {args.address}: {exc}", file=sys.stderr)
         return 1

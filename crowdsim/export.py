@@ -9,6 +9,8 @@ For a recording named `X` the writer produces, in one folder:
 - `X.labels.tsv`: `frame<TAB>ped<TAB>group`, the ground-truth label of every row of `X.txt`, so that
   labels that change over time (leave and merge events) are exact per frame;
 - `X.json`: scenario, seed, steps and every parameter.
+With `fmt="trajnet"` the rows and their labels go instead into one TrajNet++ file `X.ndjson` (`crowdsim.trajnet`:
+scenes and tracks, the label as a `group` field), beside the same `X.json`.
 Files are written atomically (temporary file, then rename), and identical inputs give identical bytes.
 """
 
@@ -23,6 +25,8 @@ import numpy as np
 
 from crowdsim.files import write_text_atomic
 from crowdsim.state import CrowdState
+from crowdsim.trajnet import SUFFIX as TRAJNET_SUFFIX
+from crowdsim.trajnet import scene_windows, trajnet_text
 
 FRAME_STRIDE = 10  # frame ids per recording step, as in the ETH/UCY benchmark files
 
@@ -199,16 +203,43 @@ def groups_text(table: np.ndarray) -> str:
 
 
 RecordingFiles = dict[str, tuple[str, str]]  # kind ("trajectories", ...) -> (file name, text)
+FORMATS = ("ethucy", "trajnet")  # file formats of a recording: ETH/UCY text files, or TrajNet++ ndjson
 
 
-def recording_files(name: str, log: TrajectoryLog, metadata: dict[str, Any]) -> RecordingFiles:
-    """The four files of recording `name` as texts, in memory (what `write_recording` writes): kind ->
-    (file name, text), kinds "trajectories", "groups", "labels", "metadata" in that order."""
-    return table_files(name, log.table(), metadata)
+def check_format(fmt: str) -> str:
+    """`fmt` if it is one of `FORMATS`; ValueError listing them otherwise."""
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown format {fmt!r}; valid: {', '.join(FORMATS)}")
+    return fmt
 
 
-def table_files(name: str, table: np.ndarray, metadata: dict[str, Any]) -> RecordingFiles:
+def recording_files(name: str, log: TrajectoryLog, metadata: dict[str, Any], fmt: str = "ethucy") -> RecordingFiles:
+    """The files of recording `name` as texts, in memory (what `write_recording` writes): kind -> (file name,
+    text). "ethucy": kinds "trajectories", "groups", "labels", "metadata" in that order; "trajnet": kinds
+    "trajectories" (`X.ndjson`) and "metadata"."""
+    return table_files(name, log.table(), metadata, fmt)
+
+
+def trajnet_files(name: str, table: np.ndarray, metadata: dict[str, Any]) -> RecordingFiles:
+    """`X.ndjson` (`crowdsim.trajnet.trajnet_text`, scenes at the recording's rate) and `X.json`, which also
+    counts the scenes and the groups of two or more (`groups_text`'s partition)."""
+    fps = 1.0 / float(metadata.get("record_dt_s", 0.4))
+    names = {"trajectories": f"{name}{TRAJNET_SUFFIX}", "metadata": f"{name}.json"}
+    meta = dict(metadata)
+    meta.update(rows=len(table), pedestrians=len(np.unique(table[:, 1])) if len(table) else 0,
+                frame_stride=FRAME_STRIDE, files=names, format="trajnet", fps=fps,
+                scenes=len(scene_windows(table, FRAME_STRIDE)),
+                groups_of_two_or_more=len(groups_text(table).splitlines()))
+    return {
+        "trajectories": (names["trajectories"], trajnet_text(table, fps, FRAME_STRIDE)),
+        "metadata": (names["metadata"], json.dumps(meta, indent=2, sort_keys=True) + "\n"),
+    }
+
+
+def table_files(name: str, table: np.ndarray, metadata: dict[str, Any], fmt: str = "ethucy") -> RecordingFiles:
     """`recording_files` of a `TrajectoryLog.table()`."""
+    if check_format(fmt) == "trajnet":
+        return trajnet_files(name, table, metadata)
     names = {"trajectories": f"{name}.txt", "groups": f"{name}.groups.txt", "labels": f"{name}.labels.tsv",
              "metadata": f"{name}.json"}
     meta = dict(metadata)
@@ -240,6 +271,8 @@ def write_files(folder: Path, files: RecordingFiles) -> dict[str, Path]:
     return paths
 
 
-def write_recording(folder: Path, name: str, log: TrajectoryLog, metadata: dict[str, Any]) -> dict[str, Path]:
-    """Write X.txt, X.groups.txt, X.labels.tsv and X.json into folder; returns their paths."""
-    return write_files(folder, recording_files(name, log, metadata))
+def write_recording(folder: Path, name: str, log: TrajectoryLog, metadata: dict[str, Any],
+                    fmt: str = "ethucy") -> dict[str, Path]:
+    """Write X.txt, X.groups.txt, X.labels.tsv and X.json ("trajnet": X.ndjson and X.json) into folder; returns
+    their paths by kind."""
+    return write_files(folder, recording_files(name, log, metadata, fmt))

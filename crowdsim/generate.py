@@ -14,7 +14,14 @@ from tqdm import tqdm
 from crowdsim import __version__
 from crowdsim.config import SimConfig
 from crowdsim.distributed import WorkerDied, check_backend, process_context, run_in_processes
-from crowdsim.export import RecordingFiles, TrajectoryLog, recording_files, write_files, write_recording
+from crowdsim.export import (
+    RecordingFiles,
+    TrajectoryLog,
+    check_format,
+    recording_files,
+    write_files,
+    write_recording,
+)
 from crowdsim.presets import get_preset, sample_config
 from crowdsim.sim import CrowdSimulator
 
@@ -88,9 +95,10 @@ def default_name(config: SimConfig, spec: RunSpec) -> str:
 
 
 def generate(config: SimConfig, spec: RunSpec, out_dir: Path, name: str | None = None,
-             rrd: bool = False, progress: bool = False) -> dict[str, Path]:
-    """Simulate and write one recording (and optionally `<name>.rrd`, written as the simulation runs and removed if
-    it does not finish) into out_dir."""
+             rrd: bool = False, progress: bool = False, fmt: str = "ethucy") -> dict[str, Path]:
+    """Simulate and write one recording in format `fmt` (`crowdsim.export.FORMATS`), and optionally `<name>.rrd`
+    (written as the simulation runs and removed if it does not finish), into out_dir."""
+    check_format(fmt)
     name = name or default_name(config, spec)
     out_dir = Path(out_dir)
     rrd_path = out_dir / f"{name}.rrd" if rrd else None
@@ -100,7 +108,7 @@ def generate(config: SimConfig, spec: RunSpec, out_dir: Path, name: str | None =
         if rrd_path is not None:
             rrd_path.unlink(missing_ok=True)
         raise
-    paths = write_recording(out_dir, name, log, metadata(config, spec, sim))
+    paths = write_recording(out_dir, name, log, metadata(config, spec, sim), fmt)
     if rrd_path is not None:
         paths["rrd"] = rrd_path
     return paths
@@ -115,13 +123,14 @@ class RecordingJob:
     split: str
     name: str
     preset: str | None = None  # "name@version" of the preset the config was drawn from
+    fmt: str = "ethucy"  # file format (`crowdsim.export.FORMATS`)
 
 
 def render_job(job: RecordingJob) -> RecordingFiles:
     """Simulate one dataset recording and return its files as texts (written by the caller): the unit of
     work of every backend, so that they all produce the same bytes."""
     log, sim = simulate(job.config, job.spec)
-    return recording_files(job.name, log, metadata(job.config, job.spec, sim, job.preset))
+    return recording_files(job.name, log, metadata(job.config, job.spec, sim, job.preset), job.fmt)
 
 
 def split_of(index: int, n: int) -> str:
@@ -135,7 +144,7 @@ def split_of(index: int, n: int) -> str:
 
 
 def dataset_jobs(scenarios: list[str], seeds_per_scenario: int, base: SimConfig, spec: RunSpec,
-                 preset: str | None = None) -> list[RecordingJob]:
+                 preset: str | None = None, fmt: str = "ethucy") -> list[RecordingJob]:
     """The recordings of a dataset, scenario-major: seed spec.seed + k of each scenario goes to
     `split_of(k, seeds_per_scenario)`. With a preset name, each recording's config is drawn from the preset
     (`crowdsim.presets.sample_config`, from the scenario and the recording's seed) instead of `base`."""
@@ -146,7 +155,8 @@ def dataset_jobs(scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
             run = replace(spec, seed=spec.seed + k)
             config = sample_config(chosen, scen, run.seed) if chosen else replace(base, scenario=scen)
             tag = f"{chosen.name}@{chosen.version}" if chosen else None
-            jobs.append(RecordingJob(config, run, split_of(k, seeds_per_scenario), default_name(config, run), tag))
+            jobs.append(RecordingJob(config, run, split_of(k, seeds_per_scenario), default_name(config, run), tag,
+                                     fmt))
     return jobs
 
 
@@ -184,7 +194,8 @@ class DatasetInterrupted(KeyboardInterrupt):
 
 def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, base: SimConfig,
                  spec: RunSpec, progress: bool = True, backend: str = "local", workers: int | None = None,
-                 address: str | None = None, preset: str | None = None) -> dict[str, list[Path]]:
+                 address: str | None = None, preset: str | None = None,
+                 fmt: str = "ethucy") -> dict[str, list[Path]]:
     """Generate `seeds_per_scenario` recordings per scenario into out_dir/{train,val,test}/.
 
     Seeds are spec.seed + k; recording k of a scenario goes to `split_of(k, seeds_per_scenario)`.
@@ -200,19 +211,21 @@ def make_dataset(out_dir: Path, scenarios: list[str], seeds_per_scenario: int, b
             cluster, whose nodes need crowdsim installed. An already initialised Ray is used as it is.
         preset: a `crowdsim.presets.PRESETS` name: each recording's config is drawn from it (base is unused);
             its metadata records "name@version".
+        fmt: file format of every recording, "ethucy" or "trajnet" (`crowdsim.export.FORMATS`).
 
     Returns the trajectory file paths of each split, in job order (scenario-major, then seed). A recording whose
     worker process died twice (local pool) is not written; the others are, then DatasetIncomplete names it.
     Ctrl-C raises DatasetInterrupted (a KeyboardInterrupt) saying how many recordings were written.
     """
     check_backend(backend)
+    check_format(fmt)
     if address is not None and backend != "ray":
         raise ValueError("address needs backend='ray'")
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     if workers is not None and address is not None:
         raise ValueError("workers sizes a local Ray instance; with an address the cluster's CPUs decide")
-    jobs = dataset_jobs(scenarios, seeds_per_scenario, base, spec, preset)
+    jobs = dataset_jobs(scenarios, seeds_per_scenario, base, spec, preset, fmt)
     if backend == "ray":
         from crowdsim.distributed import run_on_ray
 

@@ -4,7 +4,8 @@ A trajectory file has one row per (frame, pedestrian): ``frame ped x y`` separat
 whitespace, positions in metres. A group file (``X.groups.txt`` beside ``X.txt``) holds one group
 per line, member pedestrian ids separated by whitespace; blank lines are allowed. crowdsim exports may
 also carry ``X.labels.tsv`` (``frame ped group`` per row of ``X.txt``): exact per-frame labels, which take
-precedence over the group file.
+precedence over the group file. A TrajNet++ file ``X.ndjson`` (`predictor.trajnet`) is read as a trajectory file
+too: its track rows, and its ``group`` fields as per-frame labels (it has no group file).
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from predictor.ethucy import STEP_S, DataFormatError, read_groups, read_labels, read_trajectories
+from predictor.trajnet import SUFFIX as TRAJNET_SUFFIX
+from predictor.trajnet import read_trajnet_rows
 
 __all__ = [
     "DataFormatError",
@@ -66,8 +69,12 @@ def group_file_for(path: Path) -> Path:
 
 
 def read_recording(path: str | Path) -> Recording:
-    """Read a trajectory file and its sibling group file when one exists."""
+    """Read a trajectory file and its sibling group file when one exists (a ``.ndjson`` file: its rows and
+    labels, `predictor.trajnet`)."""
     path = Path(path)
+    if path.suffix == TRAJNET_SUFFIX:
+        rows, labels = read_trajnet_rows(path)
+        return Recording(path=path, rows=rows, frame_labels=labels)
     rows = read_trajectory_file(path)
     gpath = group_file_for(path)
     groups = read_group_file(gpath) if gpath.exists() else None
@@ -77,11 +84,17 @@ def read_recording(path: str | Path) -> Recording:
 
 
 def list_trajectory_files(folder: str | Path) -> list[Path]:
-    """Sorted ``*.txt`` trajectory files in ``folder`` (group files excluded)."""
+    """Sorted ``*.txt`` and ``*.ndjson`` trajectory files in ``folder`` (group files excluded); a recording in both
+    formats (``X.txt`` and ``X.ndjson``) is a DataFormatError, as it would be read twice."""
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"no such data folder: {folder}")
-    return sorted(p for p in folder.glob("*.txt") if not p.name.endswith(GROUP_SUFFIX))
+    texts = [p for p in folder.glob("*.txt") if not p.name.endswith(GROUP_SUFFIX)]
+    ndjson = list(folder.glob(f"*{TRAJNET_SUFFIX}"))
+    both = sorted({p.stem for p in texts} & {p.stem for p in ndjson})
+    if both:
+        raise DataFormatError(f"{folder}: {both[0]} is there as both .txt and {TRAJNET_SUFFIX}; keep one format")
+    return sorted(texts + ndjson)
 
 
 def check_data_step(folder: str | Path) -> None:
@@ -105,5 +118,5 @@ def read_split(folder: str | Path) -> list[Recording]:
     """Read every trajectory file of one split folder (e.g. ``eth/test``)."""
     files = list_trajectory_files(folder)
     if not files:
-        raise FileNotFoundError(f"no *.txt trajectory files in {folder}")
+        raise FileNotFoundError(f"no *.txt or *{TRAJNET_SUFFIX} trajectory files in {folder}")
     return [read_recording(p) for p in files]

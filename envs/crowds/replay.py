@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from crowdsim.state import CrowdState
+from crowdsim.trajnet import SUFFIX as TRAJNET_SUFFIX
+from crowdsim.trajnet import read_trajnet
 from envs.crowds.crowd import match_ids
 from envs.crowds.replay_overlay import overlay_rows
 from predictor.ethucy import (  # the one ETH/UCY reader (torch-free)
@@ -61,7 +63,8 @@ class ReplayConfig:
     """How to replay a recording.
 
     Attributes:
-        path: trajectory file, rows `frame ped x y` (m), tab- or whitespace-separated.
+        path: trajectory file, rows `frame ped x y` (m), tab- or whitespace-separated, or a TrajNet++ `.ndjson`
+            file (`crowdsim.trajnet`).
         groups_path: optional group file, one group per line (ped ids separated by whitespace); a pedestrian
             not listed is its own group. None: every pedestrian is alone.
         group_overlaps: a pedestrian listed on two lines of the group file: "error" (refuse the file) or "merge"
@@ -144,6 +147,13 @@ def _check(ok: bool, message: str) -> None:
         raise ValueError(message)
 
 
+def read_rows(path: Path) -> np.ndarray:
+    """(R, 4) ``frame ped x y`` rows of a recording: an ETH/UCY text file (`predictor.ethucy`) or, by its
+    ``.ndjson`` suffix, a TrajNet++ file's track rows (`crowdsim.trajnet`; its ``group`` fields are not used:
+    groups come from `groups_path`)."""
+    return read_trajnet(path).rows if path.suffix == TRAJNET_SUFFIX else read_trajectories(path)
+
+
 def _snap(u: float) -> float:
     """u (annotation steps) snapped onto the nearest whole step when within `_SNAP` of it."""
     return float(round(u)) if abs(u - round(u)) < _SNAP else u
@@ -200,7 +210,7 @@ class ReplayCrowd:
         self.name = config.name or config.path.stem + (f"_x{config.overlay}" if config.overlay > 1 else "")
         self.dt_s = config.dt_s
         self.walls = config.walls_array
-        rows = read_trajectories(config.path)
+        rows = read_rows(config.path)
         if config.overlay > 1:
             rows = overlay_rows(rows, config.overlay, config.frame_increment or infer_frame_increment(rows[:, 0]))
         self._load_tracks(rows)
