@@ -154,4 +154,5 @@ def test_trace_episode_replays_the_benchmark_episode_and_refuses_misuse(capsys, 
     assert len(err) == 1 and err[0].startswith("trace_episode: seed 5 is not one of")
     assert trace.main(["crowdnav-tune", cell.name, str(seed), "--mpc", "horizon=3"]) == 2  # not an MPCConfig field
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("trace_episode: unknown --mpc field 'horizon'; did you mean 'horizon_steps'?")
+    assert len(err) == 1
+    assert err[0].startswith("trace_episode: unknown --mpc field 'horizon'; did you mean 'horizon_steps'?")
