@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[dev,bench,rl,ray]"
+	$(PY) -m pip install --quiet -e ".[dev,bench,rl,ray,video]"
 	# ORCA (the crowdnav-classic/-plusplus suites): without its declared ir-sim, which it never imports (README)
 	$(PY) -m pip install --quiet --no-deps pyrvo==0.4.3
 	touch $(STAMP)

@@ -27,9 +27,11 @@ from envs.cli_options import (
     OBSERVATION_POLICIES,
     add_backend_options,
     add_policy_options,
+    add_video_options,
     check_backend,
     check_env_flags,
     check_input_files,
+    check_video_flags,
     default_workers,
     ignored_flag,
     policy_configs,
@@ -81,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="observe R range rays to the walls (for agents trained with crowdnav train --wall-rays R)")
     e.add_argument("--record", type=int, default=0, metavar="R",
                    help="rerun recordings (.rrd) of the first R episodes (about 11 MB per plaza episode)")
+    add_video_options(e)
     e.add_argument("--replay-file", type=Path, default=None, metavar="PATH",
                    help="scenario replay: ETH/UCY-format trajectory file (frame ped x y)")
     e.add_argument("--frame-step", type=float, default=None, metavar="S",
@@ -219,6 +222,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     if args.episodes < 1 or args.seed < 0 or args.record < 0:
         raise UsageError("--episodes must be >= 1, --seed and --record >= 0")
+    check_video_flags(args)
     check_backend(args)
     check_env_flags(args)
     configs = policy_configs(args)
@@ -242,7 +246,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     for pcfg in configs:
         try:
             result = evaluate(pcfg, config, args.episodes, args.seed, args.workers, args.record, args.out,
-                              progress=not args.no_progress, backend=args.backend, address=args.address, check=False)
+                              progress=not args.no_progress, backend=args.backend, address=args.address, check=False,
+                              video=args.video, video_format=str(args.video_format), video_size=int(args.video_size))
         except KeyboardInterrupt as exc:
             kept = (f"results of {', '.join(r['policy'] for r in results)} written to {args.out}" if results
                     else "no results written")

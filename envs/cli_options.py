@@ -75,9 +75,44 @@ class DefaultInt(int):
     """A flag's default value that remembers it was not given on the command line (`given`)."""
 
 
+class DefaultStr(str):
+    """A flag's default text that remembers it was not given on the command line (`given`)."""
+
+
 def given(value: object) -> bool:
-    """Whether a flag's value came from the command line (not its default: None, [] or a `DefaultInt`)."""
-    return value is not None and value != [] and not isinstance(value, DefaultInt)
+    """Whether a flag's value came from the command line (not its default: None, [], a `DefaultInt` or a
+    `DefaultStr`)."""
+    return value is not None and value != [] and not isinstance(value, DefaultInt | DefaultStr)
+
+
+def add_video_options(p: argparse.ArgumentParser) -> None:
+    """`crowdnav evaluate`'s --video, --video-format, --video-size (`envs.drawing.video`)."""
+    from envs.drawing.video import DEFAULT_SIZE_PX, VIDEO_FORMATS
+
+    p.add_argument("--video", type=int, default=0, metavar="N",
+                   help="videos of the first N episodes per policy: <out>/videos/<policy>-<scenario>-seed<k>.mp4")
+    p.add_argument("--video-format", choices=VIDEO_FORMATS, default=DefaultStr("mp4"),
+                   help='mp4 (H.264; the video extra: pip install -e ".[video]") or gif (Pillow)')
+    p.add_argument("--video-size", type=int, default=DefaultInt(DEFAULT_SIZE_PX), metavar="PX",
+                   help="video frame side, px (even)")
+
+
+def check_video_flags(args: argparse.Namespace) -> None:
+    """--video >= 0; --video-format / --video-size only with --video N > 0; the format's encoder installed."""
+    from envs.drawing.video import check_video_options
+
+    if args.video < 0:
+        raise ValueError(f"--video must be >= 0, got {args.video}")
+    if args.video == 0:
+        extra = [f for f, v in (("--video-format", args.video_format), ("--video-size", args.video_size)) if given(v)]
+        if extra:
+            raise ValueError(f"{' and '.join(extra)} need --video N (N > 0)")
+        return
+    from envs.drawing.video import MIN_SIZE_PX
+
+    if args.video_size < MIN_SIZE_PX or args.video_size % 2:
+        raise ValueError(f"--video-size must be an even number of pixels >= {MIN_SIZE_PX}, got {args.video_size}")
+    check_video_options(str(args.video_format), int(args.video_size))
 
 
 def default_workers() -> int:

@@ -40,6 +40,9 @@ def test_core_packages_never_import_each_other(package):
     ("stable_baselines3", {*RL_MODULES, "envs/policies/sb3_files.py", "envs/rl/train.py"}),
     ("casadi", None),  # casadi only inside planner/
     ("ray", {"crowdsim/distributed.py"}),  # the optional Ray backend (envs reuses it)
+    ("imageio_ffmpeg", {"envs/drawing/video.py"}),  # the MP4 encoder (the optional video extra)
+    ("imageio", {"envs/drawing/video.py"}),
+    ("PIL", {"envs/drawing/video.py"}),  # GIF frames; matplotlib uses Pillow on its own
 ])
 def test_heavy_dependencies_stay_in_their_place(module, allowed):
     home = {"torch": "predictor", "casadi": "planner"}.get(module)

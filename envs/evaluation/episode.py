@@ -16,6 +16,7 @@ import math
 import pickle
 import time
 import traceback
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from envs.config import CrowdNavConfig
+from envs.drawing.video import DEFAULT_SIZE_PX, check_video_settings, record_video
 from envs.env import CrowdNavEnv
 from envs.evaluation.records import SOCIAL_FLOAT_FIELDS, EpisodeRecord, finite_or_none
 from envs.policies import PolicyConfig, decide, make_policy
@@ -96,9 +98,33 @@ def _counts(policy: Any) -> tuple[int, int, list[float]]:
 
 
 @dataclass(frozen=True)
+class VideoSpec:
+    """A video of an episode: file `path`, format `fmt` (mp4 or gif), square frames of `size_px` px (even)."""
+
+    path: str
+    fmt: str = "mp4"
+    size_px: int = DEFAULT_SIZE_PX
+
+    def __post_init__(self) -> None:
+        check_video_settings(self.fmt, self.size_px)
+
+
+class _Observers:
+    """Hands every frame to each of several observers (a rerun recording and a video)."""
+
+    def __init__(self, observers: list[Any]) -> None:
+        self.observers = observers
+
+    def log(self, frame: Any) -> None:
+        for observer in self.observers:
+            observer.log(frame)
+
+
+@dataclass(frozen=True)
 class EpisodeTask:
     """One episode: env config, policy config, seed; `cell` names the benchmark cell ("" outside one).
-    keep_scene: also return trajectories; rrd_path: write a rerun recording; error_dir: tracebacks go here."""
+    keep_scene: also return trajectories; rrd_path: write a rerun recording; video: write a video (drawn in the
+    process that runs the episode, frame rate the env's `render_fps`); error_dir: tracebacks go here."""
 
     env: CrowdNavConfig
     policy: PolicyConfig
@@ -108,6 +134,7 @@ class EpisodeTask:
     keep_scene: bool = False
     rrd_path: str | None = None
     error_dir: str | None = None
+    video: VideoSpec | None = None
 
 
 def fingerprint(*parts: Any) -> str:
@@ -159,14 +186,7 @@ class _Runner:
 
     def run(self, task: EpisodeTask) -> dict[str, Any]:
         try:
-            if task.rrd_path is not None:
-                from envs.drawing.rerun_observer import RerunObserver
-
-                with RerunObserver(task.rrd_path) as observer:
-                    result = run_episode(task.env, task.policy, task.seed, task.keep_scene, observer, self.env,
-                                         self.policy)
-            else:
-                result = run_episode(task.env, task.policy, task.seed, task.keep_scene, None, self.env, self.policy)
+            result = self._episode(task)
         except Exception as exc:  # a (plug-in) policy failed inside the episode: record it and go on
             return {"record": _error_record(task, self.policy_name, exc)}
         out: dict[str, Any] = {"record": record_of(task, result, self.policy_name)}
@@ -176,6 +196,25 @@ class _Runner:
                             "walls": np.asarray(self.env.crowd.walls, float).reshape(-1, 2, 2),
                             "bounds": tuple(self.env.crowd.bounds)}
         return out
+
+    def _episode(self, task: EpisodeTask) -> EpisodeResult:
+        """Run the task's episode with its observers: a rerun recording and/or a video (written atomically)."""
+        with ExitStack() as stack:
+            observers: list[Any] = []
+            if task.rrd_path is not None:
+                from envs.drawing.rerun_observer import RerunObserver
+
+                observers.append(stack.enter_context(RerunObserver(task.rrd_path)))
+
+            def play(*more: Any) -> EpisodeResult:
+                obs = [*observers, *more]
+                return run_episode(task.env, task.policy, task.seed, task.keep_scene,
+                                   _Observers(obs) if obs else None, self.env, self.policy)
+
+            if task.video is None:
+                return play()
+            v = task.video
+            return record_video(v.path, play, fmt=v.fmt, fps=self.env.metadata["render_fps"], size_px=v.size_px)
 
 
 def _error_record(task: EpisodeTask, policy_name: str, exc: BaseException) -> EpisodeRecord:

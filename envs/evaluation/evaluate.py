@@ -3,7 +3,8 @@
 Episodes use seeds seed, seed + 1, ..., seed + episodes - 1 (the env's `reset(seed)` fixes the crowd and the
 robot's route, so every policy meets the same episodes) and run through `envs.evaluation.pool` (local process pool by
 default, or Ray). Outputs in `out_dir`: `<stem>.json` (the returned summary), `<stem>.md`, `<stem>.png`
-(rates and example trajectories) and `<stem>_seed<S>.rrd` for the first `record` episodes (none by default). Metric
+(rates and example trajectories), `<stem>_seed<S>.rrd` for the first `record` episodes and
+`videos/<stem>-<scenario>-seed<S>.mp4` (or .gif) for the first `video` episodes (none by default). Metric
 definitions: docs/envs.md, "Evaluation metrics (envs)", and `envs.evaluation.stats.aggregate`.
 """
 
@@ -19,7 +20,8 @@ from typing import Any
 
 from envs.atomic import check_writable_dir, write_json_atomic, write_text_atomic
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
-from envs.evaluation.episode import EpisodeTask, fingerprint
+from envs.drawing.video import DEFAULT_SIZE_PX, check_video_options, video_name
+from envs.evaluation.episode import EpisodeTask, VideoSpec, fingerprint
 from envs.evaluation.pool import run_tasks
 from envs.evaluation.records import EpisodeRecord
 from envs.evaluation.report import N_DRAWN, markdown_table, plot_result
@@ -103,7 +105,8 @@ def check_setup(policy: PolicyConfig, config: CrowdNavConfig) -> None:
 def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int = 20, seed: int = 0, workers: int = 1,
              record: int = 0, out_dir: str | Path | None = None, *, stem: str | None = None, draw: int = N_DRAWN,
              progress: bool = True, backend: str = "local", address: str | None = None,
-             check: bool = True) -> dict[str, Any]:
+             check: bool = True, video: int = 0, video_format: str = "mp4",
+             video_size: int = DEFAULT_SIZE_PX) -> dict[str, Any]:
     """Evaluate a policy (a name, or a `PolicyConfig`) on episodes seed .. seed + episodes - 1.
 
     Args:
@@ -116,8 +119,12 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
         progress: show a tqdm bar over episodes (on stderr).
         backend, address: `envs.evaluation.pool.run_tasks`.
         check: build the env and policy once first (`check_setup`); False when the caller already did.
+        video: the first `video` episodes are written as videos `videos/<stem>-<scenario>-seed<S>.<video_format>`
+            (needs `out_dir`), drawn by `envs.drawing.render.render_rgb` in the process that runs the episode;
+            video_format: mp4 (the 'video' extra) or gif; video_size: frame side, px (even).
 
-    Ctrl-C raises `Interrupted` saying how many episodes were done (nothing of this policy is written then).
+    Ctrl-C raises `Interrupted` saying how many episodes were done (nothing of this policy is written then, but the
+    recordings and videos of finished episodes; never a half-written one).
 
     Returns the JSON-ready summary (`stats.aggregate` plus policy, predictor (the one it ran, None for a
     policy without one), policy_config, scenario, seed, config,
@@ -126,9 +133,13 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
     from tqdm.auto import tqdm
 
     pcfg = policy if isinstance(policy, PolicyConfig) else PolicyConfig(name=policy)
-    if episodes < 1 or seed < 0 or workers < 1 or record < 0:
-        raise ValueError(f"need episodes >= 1, seed >= 0, workers >= 1, record >= 0; got {episodes}, {seed}, "
-                         f"{workers}, {record}")
+    if episodes < 1 or seed < 0 or workers < 1 or record < 0 or video < 0:
+        raise ValueError(f"need episodes >= 1, seed >= 0, workers >= 1, record >= 0, video >= 0; got {episodes}, "
+                         f"{seed}, {workers}, {record}, {video}")
+    if video > 0:
+        if out_dir is None:
+            raise ValueError("videos need an output folder (out_dir)")
+        check_video_options(video_format, video_size)
     stem = stem or pcfg.name.replace("/", "_").replace(":", "_")
     out = check_writable_dir(out_dir) if out_dir is not None else None
     if check:
@@ -139,7 +150,9 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
     fp = fingerprint(config_summary(config), *policy_identity(pcfg))  # with the weights' digest
     tasks = [EpisodeTask(config, pcfg, s, fingerprint=fp, keep_scene=out is not None and i < draw,
                          rrd_path=str(out / f"{stem}_seed{s}.rrd") if out is not None and i < record else None,
-                         error_dir=str(out / "errors") if out is not None else None)
+                         error_dir=str(out / "errors") if out is not None else None,
+                         video=VideoSpec(str(out / "videos" / video_name(stem, config.scenario, s, video_format)),
+                                         video_format, video_size) if out is not None and i < video else None)
              for i, s in enumerate(seeds)]
     start = time.perf_counter()
     runs: dict[int, dict[str, Any]] = {}
@@ -161,6 +174,7 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
     files = []
     if out is not None:
         files = [f"{stem}.json", f"{stem}.md", f"{stem}.png"] + [Path(t.rrd_path).name for t in tasks if t.rrd_path]
+        files += [f"videos/{Path(t.video.path).name}" for t in tasks if t.video is not None]
     result["run"] = {"workers": workers, "backend": backend, "wall_time_s": wall,
                      "episode_wall_time_s": sum(r.wall_time_s for r in records) / len(records), "files": files}
     if out is not None:
