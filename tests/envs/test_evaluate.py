@@ -14,6 +14,7 @@ from envs.config import CrowdNavConfig
 from envs.evaluation.evaluate import evaluate
 from envs.evaluation.report import compare
 from envs.policies import ENV_MPC, PolicyConfig
+from tests.cli_helpers import run_cli
 
 REQUIRED_KEYS = {
     "policy", "predictor", "scenario", "seed", "episodes", "config", "episode_list",
@@ -28,12 +29,8 @@ SMALL = CrowdNavConfig(n_pedestrians=8, time_limit_s=6.0)
 
 
 def _cli(args, capsys):
-    """(exit code, stderr) of `crowdnav ARGS`, whether argparse exits or main returns."""
-    try:
-        code = main(args)
-    except SystemExit as exc:
-        code = exc.code
-    return code, capsys.readouterr().err
+    """(exit code, stderr) of `crowdnav ARGS`."""
+    return run_cli(main, args, capsys)
 
 
 def test_compare_table_has_a_row_per_policy():

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from envs.rl.monitor import is_new_best, select_best
+from tests.cli_helpers import terminal_sigint
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = ["--pedestrians", "5", "--time-limit-s", "4", "--envs", "2", "--n-steps", "64", "--batch-size", "64",
@@ -28,12 +29,6 @@ def test_the_step_0_agent_is_the_baseline_never_the_best():
     assert select_best([(0, 0.2, 1.0), (256, 0.4, 0.0), (512, 0.4, 1.5), (768, 0.4, 1.0), (1024, 0.3, 9.0)]) == 2
     assert select_best([(0, 1.0, 9.0)]) is None
     assert not is_new_best(256, 1.0, float("nan"), (-1.0, -float("inf")))  # a NaN return is never kept
-
-
-def _ctrl_c_default() -> None:
-    """In the child: Ctrl-C as in a terminal, even when this test runs where SIGINT is ignored (a shell's
-    background job), which the child would inherit."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _eval_steps(out: Path) -> list[int]:
@@ -50,7 +45,7 @@ def test_ctrl_c_saves_a_state_that_resume_continues_and_best_is_a_trained_agent(
     cmd = [sys.executable, "-m", "envs.cli", "train"]
     proc = subprocess.Popen([*cmd, *SMALL, "--steps", "100000", "--out", str(out)], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=_ctrl_c_default)
+                            preexec_fn=terminal_sigint)
     seen = []
     deadline = time.monotonic() + 240
     for line in proc.stdout:  # progress lines "   STEPS/100000 steps ..." after each rollout

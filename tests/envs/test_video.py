@@ -18,6 +18,7 @@ from envs.env import CrowdNavEnv
 from envs.evaluation.episode import VideoSpec
 from envs.evaluation.evaluate import evaluate
 from envs.policies import decide, make_policy
+from tests.cli_helpers import run_cli
 
 # the CLI's flags below make exactly this env config (a crowd of 6 keeps the default group sizes)
 CONFIG = CrowdNavConfig(scenario="corridor", n_pedestrians=6, time_limit_s=2.0)
@@ -25,12 +26,8 @@ SMALL = ["--scenario", "corridor", "--pedestrians", "6", "--time-limit", "2", "-
 
 
 def _cli(args, capsys):
-    """(exit code, stderr) of `crowdnav ARGS`, whether argparse exits or main returns."""
-    try:
-        code = main(args)
-    except SystemExit as exc:
-        code = exc.code
-    return code, capsys.readouterr().err
+    """(exit code, stderr) of `crowdnav ARGS`."""
+    return run_cli(main, args, capsys)
 
 
 def _mp4(path):

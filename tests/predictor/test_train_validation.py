@@ -19,6 +19,7 @@ from predictor.cli import main
 from predictor.data import read_recording
 from predictor.train_split import holdout_windows, split_recording
 from predictor.windows import recording_windows
+from tests.cli_helpers import terminal_sigint
 from tests.predictor.conftest import write_synthetic_split
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -76,12 +77,6 @@ def test_val_fraction_trains_and_says_where_it_validates(tmp_path: Path, capsys)
     assert "has its own val/ split" in capsys.readouterr().err and not (tmp_path / "run2").exists()
 
 
-def _ctrl_c_default() -> None:
-    """In the child: Ctrl-C as in a terminal, even when this test runs where SIGINT is ignored (a shell's
-    background job), which the child would inherit."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def _epochs(out: Path) -> list[int]:
     with (out / "log.csv").open(newline="") as f:
         return [int(r["epoch"]) for r in csv.DictReader(f)]
@@ -96,7 +91,7 @@ def test_ctrl_c_in_train_is_one_line_exit_130_and_resume_continues(synthetic_dat
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen([*argv, "--epochs", "100000"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, start_new_session=True,
-                            preexec_fn=_ctrl_c_default)
+                            preexec_fn=terminal_sigint)
     deadline = time.monotonic() + 120
     while not (out / "last.pt").is_file() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.2)
