@@ -196,9 +196,9 @@ class MPCPlanner:
         finite = bool(np.all(np.isfinite(w)))
         slack = ocp.slack_fn(w, p).full().reshape(ocp.layout.s.shape) if finite else np.full((1, 1), np.inf)
         status = self._classify(stats, elapsed, finite, float(slack[:2].max(initial=0.0)))
-        cost = float(sol["f"])
+        cost = float(sol["f"]) if finite else np.inf
         return _Try(w, status, solver_status, elapsed, int(stats.get("iter_count", 0)), float(slack.max(initial=0.0)),
-                    cost if finite and np.isfinite(cost) else np.inf)
+                    cost if np.isfinite(cost) else np.inf)
 
     def _classify(self, stats: dict, elapsed: float, finite: bool, first_slack: float) -> str:
         """Outcome of a solve; ``first_slack`` is the clearance violation (m) at the first planned step."""
