@@ -123,6 +123,37 @@ class SpaceTimeConfig:
 
 
 @dataclass(frozen=True)
+class GuidanceConfig:
+    """Settings of the guidance layer (planner/guidance.py): passing options searched in space-time, each held by
+    half-planes in its own solve; metres, seconds, degrees."""
+
+    n_paths: int = 2  # guided solves beside the free one (the MPC as without guidance)
+    heading_offsets_deg: tuple[float, ...] = (0.0, -25.0, 25.0, -50.0, 50.0, -80.0, 80.0)  # from the goal direction
+    speed_fractions: tuple[float, ...] = (1.0, 0.5)  # of the robot's top speed; a standing path is always added
+    relevance_m: float = 1.5  # a person whose predicted surface gap to a path falls below this gets a passing side
+    min_winding_deg: float = 10.0  # the bearing must turn at least this much over the horizon to count as a side
+    risk_weight: float = 20.0  # path cost per metre of shortfall below the MPC's clearance, summed over knots
+    hold_discount: float = 0.1  # a plan that keeps the last applied plan's passing sides costs this fraction less
+
+    def __post_init__(self) -> None:
+        if self.n_paths < 1:
+            raise ValueError(f"GuidanceConfig.n_paths must be >= 1, got {self.n_paths!r}")
+        if not self.heading_offsets_deg or not self.speed_fractions:
+            raise ValueError("GuidanceConfig.heading_offsets_deg and speed_fractions must not be empty")
+        for name, values in (("heading_offsets_deg", self.heading_offsets_deg),
+                             ("speed_fractions", self.speed_fractions)):
+            if not all(math.isfinite(v) for v in values):
+                raise ValueError(f"GuidanceConfig.{name} must be finite, got {values!r}")
+        if not all(0.0 < v <= 1.0 for v in self.speed_fractions):
+            raise ValueError(f"GuidanceConfig.speed_fractions must be in (0, 1], got {self.speed_fractions!r}")
+        for name in ("relevance_m", "min_winding_deg", "risk_weight"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"GuidanceConfig.{name} must be >= 0, got {getattr(self, name)!r}")
+        if not 0.0 <= self.hold_discount < 1.0:
+            raise ValueError(f"GuidanceConfig.hold_discount must be in [0, 1), got {self.hold_discount!r}")
+
+
+@dataclass(frozen=True)
 class LaneConfig:
     """Settings of the lane layer (planner/lanes.py); metres, metres per second."""
 
@@ -220,6 +251,8 @@ class MPCConfig:
     lane: LaneConfig | None = None
     # -- space-time search layer (planner/spacetime.py); None (default): off --------------------------------------
     spacetime: SpaceTimeConfig | None = None
+    # -- guidance layer (planner/guidance.py); None (default): one free solve, the MPC before 2026-11-28 ----------
+    guidance: GuidanceConfig | None = None
 
     @property
     def wall_clearance_m(self) -> float:

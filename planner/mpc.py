@@ -10,12 +10,24 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.dynamics import brake_control, clip_control, model_dims, step_numpy
+from planner.guidance import (
+    checked_points,
+    goal_rollouts,
+    guidance_rollouts,
+    half_planes,
+    keeps_sides,
+    passing_sides,
+    path_costs,
+    ped_gaps,
+    pick_options,
+    side_map,
+)
 from planner.lanes import LaneKeeper
-from planner.ocp import OCP, build_ocp, pack_params
-from planner.prediction import PedPrediction, empty_prediction, validate_prediction
+from planner.ocp import OCP, build_ocp, pack_params, param_slices
+from planner.prediction import PedPrediction, current_positions, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
 from planner.route import Router
-from planner.scene import build_scene, validate_obstacles
+from planner.scene import FAR_M, SceneArrays, build_scene, validate_obstacles
 from planner.shield import shield_control
 from planner.spacetime import SpaceTimeSearch
 
@@ -26,7 +38,8 @@ HEADING_OFFSETS_RAD = (0.0, -0.6, 0.6, -1.2, 1.2)  # first-guess directions rela
 @dataclass(frozen=True)
 class _Try:
     """One solve: the solution w, its outcome (``MPCPlanner._classify``), the solver's status, wall time (s),
-    iterations, largest slack (m) and objective (inf where not finite)."""
+    iterations, largest slack (m) and objective (inf where not finite); with guidance, the passing sides of its plan
+    (input row -> +1 / -1, planner/guidance.py)."""
 
     w: np.ndarray
     status: str
@@ -35,6 +48,7 @@ class _Try:
     iters: int
     max_slack: float
     cost: float
+    sides: dict[int, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -92,6 +106,8 @@ class MPCPlanner:
         self._plan: _Plan | None = None
         self._shielded: np.ndarray | None = None  # the command the shield applied last step, if it replaced one
         self._mapped: dict[int, tuple] = {}  # `_maps`
+        self._sides: dict[int, int] = {}  # guidance: the passing sides of the last applied plan (input row -> side)
+        self._options: list[tuple[np.ndarray, np.ndarray, dict[int, int] | None]] = []  # other solved plans, best first
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
         lane = self.config.lane
         self.lanes = LaneKeeper(lane, self.config.wall_clearance_m) if lane is not None else None
@@ -105,6 +121,7 @@ class MPCPlanner:
         stats."""
         self._plan = None
         self._shielded = None
+        self._sides, self._options = {}, []
         if self.router is not None:
             self.router.reset()
         if self.lanes is not None:
@@ -153,13 +170,19 @@ class MPCPlanner:
         """``result`` with its first control checked by the safety shield (planner/shield.py); the shield's
         wall time is added to ``solve_time_s``. A shield error keeps the plan's control (never raises)."""
         start = time.perf_counter()
+        options = self._options if result.status == "solved" else []
         try:
-            verdict = shield_control(state, result.controls, prediction, obstacles, self.config, self._shielded)
+            verdict = shield_control(state, result.controls, prediction, obstacles, self.config, self._shielded,
+                                     np.array([controls for _, controls, _ in options]) if options else None)
         except Exception:  # the plan's own control is still a valid (if unchecked) answer
             self._shielded = None
             return result
-        self._shielded = verdict.control.copy() if verdict.replaced else None
+        self._shielded = verdict.control.copy() if verdict.replaced and verdict.option < 0 else None
         elapsed = time.perf_counter() - start
+        if verdict.option >= 0:  # another passing option's plan is safe where the chosen one is not: apply it
+            states, controls, sides = options[verdict.option]
+            self._plan, self._sides = _Plan(states, controls, 0), sides or {}
+            result = replace(result, states=states, controls=controls)
         return replace(result, control=verdict.control, solve_time_s=result.solve_time_s + elapsed,
                        shield_risk=verdict.risk, shielded=verdict.replaced)
 
@@ -173,16 +196,67 @@ class MPCPlanner:
             return self._fallback(state, "infeasible", "start in collision", 0.0, 0, depth)
         p = pack_params(ocp.sizes, state, goal, scene)
         tries = [self._solve_from(w0, p) for w0 in self._initial_guesses(state, goal, p, cfg.n_starts)]
+        if cfg.guidance is not None:
+            tries = self._guided_tries(state, goal, scene, prediction, p, tries)
         elapsed, iters = sum(t.elapsed for t in tries), sum(t.iters for t in tries)
-        solved = [t for t in tries if t.status == "solved"]
-        best = min(solved, key=lambda t: t.cost) if solved else tries[0]
+        solved = sorted((t for t in tries if t.status == "solved"), key=self._rank)  # stable: the free solve first
+        best = solved[0] if solved else tries[0]
+        self._options = []
         if best.status != "solved":
             return self._fallback(state, best.status, best.solver_status, elapsed, iters, best.max_slack)
         w, solver_status, max_slack = best.w, best.solver_status, best.max_slack
         states, controls = w[ocp.layout.z], w[ocp.layout.u]
         self._plan = _Plan(states, controls, 0)
+        options: tuple[np.ndarray, ...] = ()
+        if cfg.guidance is not None:
+            self._sides = best.sides or {}
+            self._options = [(t.w[ocp.layout.z], t.w[ocp.layout.u], t.sides) for t in solved[1:]]
+            options = tuple(t.w[ocp.layout.z] for t in solved)
         return PlanResult(controls[0].copy(), states, controls, "solved", solver_status, elapsed, iters,
-                          max_slack, None)
+                          max_slack, None, options=options)
+
+    def _rank(self, t: _Try) -> float:
+        """A solved plan's cost for the choice: its objective under the free problem, ``hold_discount`` less when it
+        keeps the last applied plan's passing sides (guidance only)."""
+        gc = self.config.guidance
+        if gc is None or t.sides is None or not keeps_sides(t.sides, self._sides):
+            return t.cost
+        return t.cost * (1.0 - gc.hold_discount)
+
+    def _guided_tries(self, state: np.ndarray, goal: np.ndarray, scene: SceneArrays, prediction: PedPrediction,
+                      p: np.ndarray, free: list[_Try]) -> list[_Try]:
+        """The free tries with their passing sides, then one guided solve per passing option (planner/guidance.py),
+        each judged under the free problem's objective and slacks (``p``)."""
+        cfg, ocp, layout = self.config, self.ocp, self.ocp.layout
+        now = np.full((ocp.sizes.m, 2), FAR_M) + state[:2]
+        now[: scene.ped_index.size] = current_positions(prediction)[scene.ped_index]
+        paths, path_controls = guidance_rollouts(state, goal, cfg)
+        finite = [t for t in free if np.all(np.isfinite(t.w))]
+        allstates = np.concatenate([paths, *(t.w[layout.z][None] for t in finite)])
+        gaps = ped_gaps(checked_points(allstates, ocp.sizes.sub), scene)
+        sides = passing_sides(allstates, now, scene, gaps, cfg)
+        labelled = {id(t): side_map(s, scene.ped_index) for t, s in zip(finite, sides[len(paths):], strict=True)}
+        out = [replace(t, sides=labelled.get(id(t))) for t in free]
+        costs = path_costs(paths, goal, scene, cfg, gaps[: len(paths)])
+        slices = param_slices(ocp.sizes)
+        for c in pick_options(costs, sides[: len(paths)], list(sides[len(paths):]), cfg.guidance.n_paths):
+            normal, on = half_planes(paths[c], scene, gaps[c], cfg, state[:2])
+            guided = p.copy()
+            guided[slices["ped_normal"]], guided[slices["ped_side"]] = normal.ravel(), on
+            w0 = np.zeros(layout.n)
+            w0[layout.z], w0[layout.u] = paths[c], path_controls[c]
+            w0[layout.s.ravel()] = ocp.slack_fn(w0, guided).full().ravel()
+            t = self._solve_from(w0, guided)
+            if np.all(np.isfinite(t.w)):
+                slack = float(ocp.slack_fn(t.w, p).full().max(initial=0.0))
+                cost = float(ocp.cost_fn(t.w, p))
+                plan = t.w[layout.z][None]
+                plan_sides = passing_sides(plan, now, scene, ped_gaps(checked_points(plan, ocp.sizes.sub), scene),
+                                           cfg)[0]
+                t = replace(t, max_slack=slack, cost=cost if np.isfinite(cost) else np.inf,
+                            sides=side_map(plan_sides, scene.ped_index))
+            out.append(t)
+        return out
 
     def _solve_from(self, w0: np.ndarray, p: np.ndarray) -> _Try:
         """One solve of the NLP from the initial guess ``w0``, classified (``_classify``)."""
@@ -220,7 +294,9 @@ class MPCPlanner:
         rollouts pass people on different sides). Slacks are set to their minimal feasible values, which fatrop
         needs. NaN and inf costs never win; if none is finite, the last candidate alone."""
         layout = self.ocp.layout
-        states, controls = self._goal_rollouts(state, goal, np.array(HEADING_OFFSETS_RAD))
+        offsets = np.array(HEADING_OFFSETS_RAD)
+        states, controls = goal_rollouts(state, goal, offsets, np.full(offsets.size, self.config.robot.max_speed_mps),
+                                         self.config)
         candidates = list(zip(states, controls, strict=True))
         if self._plan is not None:
             prev_states = self._plan.states.copy()
@@ -244,27 +320,6 @@ class MPCPlanner:
         if n not in self._mapped:
             self._mapped[n] = (self.ocp.slack_fn.map(n), self.ocp.cost_fn.map(n))
         return self._mapped[n]
-
-    def _goal_rollouts(self, state: np.ndarray, goal: np.ndarray, offsets_rad: np.ndarray):
-        """States (C, H+1, nz) and controls (C, H, 2) of a bounded proportional controller heading to
-        the goal direction rotated by each of offsets_rad (C,)."""
-        cfg, rc = self.config, self.config.robot
-        x = np.tile(state, (len(offsets_rad), 1))
-        states, controls = [x], []
-        for _ in range(cfg.horizon_steps):
-            delta = goal - x[:, :2]
-            heading = np.arctan2(delta[:, 1], delta[:, 0]) + offsets_rad
-            if rc.model == "unicycle":
-                err = (heading - x[:, 2] + np.pi) % (2 * np.pi) - np.pi
-                want = np.stack([rc.max_speed_mps * np.maximum(np.cos(err), 0.0), 2.0 * err], axis=-1)
-            else:
-                speed = np.minimum(rc.max_speed_mps, np.linalg.norm(delta, axis=1) / cfg.dt_s)
-                want = speed[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-            u = clip_control(x, want, cfg.dt_s, rc)
-            x = step_numpy(x, u, cfg.dt_s, rc.model)
-            states.append(x)
-            controls.append(u)
-        return np.stack(states, axis=1), np.stack(controls, axis=1)
 
     def _shift(self, plan: _Plan) -> _Plan:
         """Advance a stored plan by one step: drop its first stage and repeat the last control."""

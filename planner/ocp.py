@@ -19,7 +19,9 @@ Soft constraints, all in metres (d = sqrt(|.|² + 1e-6)), at every knot p_k and,
 ``check_midpoints`` (off by default: it doubles the constraints), also half-way through each step at
 f(z_k, u_k, dt/2), which stays local to stage k and catches fast head-on passes between knots:
 
-* pedestrian m, mode j: ``mask_m (d(p, q_mj(t)) - clear_m(t)) + s_km >= 0`` (clear_m(t) may grow with t);
+* pedestrian m, mode j: ``mask_m (d(p, q_mj(t)) - clear_m(t)) + s_km >= 0`` (clear_m(t) may grow with t); with
+  guidance (``MPCConfig.guidance``) a switch per pedestrian turns it into the half-plane
+  ``mask_m (n_mj(t) . (p - q_mj(t)) - clear_m(t)) + s_km >= 0`` (planner/guidance.py);
 * group g, mode j: ``mask_g (d(p, capsule segment_gj(t)) - clear_gj(t)) + s_kg >= 0``;
 * wall w: ``mask_w (d_w(p) - (radius + wall margin)) + s_k,wall >= 0``, d_w the distance to the segment, negative
   beyond it (signed by the side the robot is on now, where p projects inside the segment): a plan cannot jump
@@ -61,13 +63,14 @@ class Sizes:
     g: int
     w: int
     sub: int
+    sides: bool = False  # guidance on: the pedestrians' constraints may be half-planes (planner/guidance.py)
 
     @staticmethod
     def from_config(cfg: MPCConfig) -> Sizes:
         dims = model_dims(cfg.robot.model)
         ns = 1 + (1 if cfg.max_groups else 0) + (1 if cfg.max_walls else 0)  # pedestrians, groups, walls
         return Sizes(dims.state_dim, dims.control_dim, ns, cfg.horizon_steps, cfg.max_peds, cfg.n_modes,
-                     cfg.max_groups, cfg.max_walls, 2 if cfg.check_midpoints else 1)
+                     cfg.max_groups, cfg.max_walls, 2 if cfg.check_midpoints else 1, cfg.guidance is not None)
 
     @property
     def nt(self) -> int:
@@ -76,20 +79,37 @@ class Sizes:
 
 
 def param_shapes(sz: Sizes) -> dict[str, tuple[int, ...]]:
-    """Shapes of the parameter blocks, in the order they are packed into the flat vector p."""
-    return {
+    """Shapes of the parameter blocks, in the order they are packed into the flat vector p. With guidance
+    (``sz.sides``) two more: each pedestrian's half-plane normals and the switch between disc and half-plane."""
+    shapes = {
         "z0": (sz.nz,), "goal": (2,),
         "ped_pos": (sz.nt, sz.m, sz.k, 2), "ped_clear": (sz.nt, sz.m), "ped_mask": (sz.m,),
         "grp_a": (sz.nt, sz.g, sz.k, 2), "grp_b": (sz.nt, sz.g, sz.k, 2), "grp_clear": (sz.nt, sz.g, sz.k),
         "grp_mask": (sz.g,), "walls": (sz.w, 4), "wall_mask": (sz.w,), "wall_side": (sz.w,),
         "v_cap": (sz.h,),
     }
+    if sz.sides:
+        shapes.update(ped_normal=(sz.nt, sz.m, sz.k, 2), ped_side=(sz.m,))
+    return shapes
+
+
+def param_slices(sz: Sizes) -> dict[str, slice]:
+    """Where each parameter block lies in the flat vector p."""
+    out, offset = {}, 0
+    for name, shape in param_shapes(sz).items():
+        size = int(np.prod(shape))
+        out[name] = slice(offset, offset + size)
+        offset += size
+    return out
 
 
 def pack_params(sz: Sizes, z0: np.ndarray, goal: np.ndarray, scene: SceneArrays) -> np.ndarray:
-    """Flat parameter vector (C order within each block)."""
+    """Flat parameter vector (C order within each block). With guidance the half-plane switches are off (every
+    pedestrian a disc): `planner.guidance` writes a guided solve's blocks over them."""
     values = {"z0": z0, "goal": goal, **{name: getattr(scene, name) for name in param_shapes(sz)
-                                         if name not in ("z0", "goal")}}
+                                         if name not in ("z0", "goal", "ped_normal", "ped_side")}}
+    if sz.sides:
+        values.update(ped_normal=np.zeros((sz.nt, sz.m, sz.k, 2)), ped_side=np.zeros(sz.m))
     parts = []
     for name, shape in param_shapes(sz).items():
         arr = np.asarray(values[name], float)
@@ -241,9 +261,8 @@ def _collision_terms(b: _Builder, k: int) -> None:
     more often, for the same plans where nothing is violated (docs/decisions/planner-settings.md, item 7)."""
     cfg, sz, par = b.cfg, b.sz, b.par
     points, s, need = _checked_points(b, k), b.s[k], []
-    exprs = [par["ped_mask"][m] * (ca.sqrt(_point_dist2(pos, par["ped_pos"][t, m, j]) + EPS_DIST_M2)
-                                   - par["ped_clear"][t, m])
-             for m in range(sz.m) for pos, t in points for j in range(sz.k)]
+    exprs = [par["ped_mask"][m] * _ped_gap(b, pos, t, m, j) for m in range(sz.m) for pos, t in points
+             for j in range(sz.k)]
     _soft(b, k, exprs, s[0], need)
     if sz.g:
         exprs = [par["grp_mask"][gi] * (_seg_dist(pos, par["grp_a"][t, gi, j], par["grp_b"][t, gi, j])
@@ -258,6 +277,19 @@ def _collision_terms(b: _Builder, k: int) -> None:
         _soft(b, k, exprs, s[sz.ns - 1], need)
     b.slack_min.append(ca.fmax(ca.vertcat(*need), 0))
     b.cost += cfg.weights.slack_l1 * ca.sum1(s) + cfg.weights.slack_l2 * ca.sumsqr(s)
+
+
+def _ped_gap(b: _Builder, pos: ca.SX, t: int, m: int, j: int) -> ca.SX:
+    """Clearance margin (m) of pos from pedestrian m, mode j at checked time t: the distance beyond the clearance;
+    with guidance, blended by the switch ``ped_side`` (0: that distance, 1: the signed distance beyond the clearance
+    along the half-plane's normal ``ped_normal``, planner/guidance.py)."""
+    par, q = b.par, b.par["ped_pos"][t, m, j]
+    disc = ca.sqrt(_point_dist2(pos, q) + EPS_DIST_M2) - par["ped_clear"][t, m]
+    if not b.sz.sides:
+        return disc
+    n, on = par["ped_normal"][t, m, j], par["ped_side"][m]
+    plane = n[0] * (pos[0] - q[0]) + n[1] * (pos[1] - q[1]) - par["ped_clear"][t, m]
+    return (1 - on) * disc + on * plane
 
 
 def _goal_cost(b: _Builder, k: int) -> None:

@@ -33,6 +33,8 @@ class PlanResult:
     shield); shielded: True when the safety shield replaced that control (``planner/shield.py``).
     subgoal: the point (2,) m the solve headed for: the goal, or the global route's subgoal (``planner/route.py``);
     None when no solve ran.
+    options: with guidance (``MPCConfig.guidance``), the planned states (H+1, state_dim) of every solved passing
+    option, the chosen one first (planner/guidance.py); empty otherwise.
     """
 
     control: np.ndarray
@@ -48,6 +50,7 @@ class PlanResult:
     shielded: bool = False
     subgoal: np.ndarray | None = None
     plan_time_s: float = 0.0
+    options: tuple[np.ndarray, ...] = ()
 
     @property
     def fallback_used(self) -> bool:

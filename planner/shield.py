@@ -58,12 +58,14 @@ WALL_CONTACT_COST = 1e6  # added to a candidate whose body would touch a wall: c
 @dataclass(frozen=True)
 class ShieldVerdict:
     """control (2,): the control to apply; risk: the fraction of samples the MPC's control hits;
-    replaced: True when the shield chose another control; chosen_risk: the chosen control's risk."""
+    replaced: True when the shield chose another control; chosen_risk: the chosen control's risk; option: the index of
+    the alternative plan whose first control was chosen (-1: none)."""
 
     control: np.ndarray
     risk: float
     replaced: bool
     chosen_risk: float
+    option: int = -1
 
 
 def candidate_controls(robot: RobotConfig, preferred: np.ndarray) -> np.ndarray:
@@ -284,23 +286,29 @@ def group_violations(xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, gro
 
 
 def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
-                   walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None) -> ShieldVerdict:
+                   walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None,
+                   alternatives: np.ndarray | None = None) -> ShieldVerdict:
     """Check the plan's controls (H, 2) (each held ``cfg.dt_s``; the first is the one to apply) from ``state``
     (state_dim,) against every predicted sample and wall; replace its first control by a constant command
     when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring). ``previous`` (2,): the command
-    the shield applied at the previous step, if it replaced the plan's control there."""
+    the shield applied at the previous step, if it replaced the plan's control there. ``alternatives`` (A, H, 2):
+    other plans from the same state (the guidance layer's other passing options), best first: when the plan fails
+    the check, the first of them that passes it gives the control, before any constant command is tried."""
     futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, horizon_steps(cfg), cfg.shield_cv)
     groups = np.asarray(prediction.group_ids)[np.asarray(prediction.mask, bool)] if cfg.shield_group_weight else None
-    return shield_futures(state, planned, futures, radii, walls, cfg, previous, certain_last=has_cv, group_ids=groups)
+    return shield_futures(state, planned, futures, radii, walls, cfg, previous, certain_last=has_cv, group_ids=groups,
+                          alternatives=alternatives)
 
 
 def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, radii: np.ndarray,
                    walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None,
-                   certain_last: bool = False, group_ids: np.ndarray | None = None) -> ShieldVerdict:
+                   certain_last: bool = False, group_ids: np.ndarray | None = None,
+                   alternatives: np.ndarray | None = None) -> ShieldVerdict:
     """`shield_control` on the pedestrians' futures (K, T, n, 2) m at the shield's own times (+shield_dt_s ..
     +T shield_dt_s, T = `horizon_steps(cfg)`) with radii (n,) m; `certain_last`: the last future counts as certain
     (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1. `group_ids` (n,):
-    the pedestrians' groups, for ``cfg.shield_group_weight`` (None: groups ignored)."""
+    the pedestrians' groups, for ``cfg.shield_group_weight`` (None: groups ignored). `alternatives`: as in
+    `shield_control`."""
     n_steps = horizon_steps(cfg)
     planned = np.asarray(planned, float)
     cands = candidate_controls(cfg.robot, planned[0])
@@ -330,6 +338,14 @@ def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, 
     wall0, short0, risk0 = check(xy0)
     if risk0[0] <= cfg.shield_max_risk:
         return ShieldVerdict(cands[0].copy(), float(risk0[0]), False, float(risk0[0]))
+    if alternatives is not None and len(alternatives):
+        plans = np.stack([plan_commands(alt, cfg.dt_s, cfg.shield_dt_s, n_steps) for alt in alternatives])
+        alt_risk = check(rollout_candidates(state, plans, cfg.shield_dt_s, cfg.robot))[2]
+        passing = np.flatnonzero(alt_risk <= cfg.shield_max_risk)
+        if passing.size:
+            i = int(passing[0])
+            return ShieldVerdict(np.asarray(alternatives[i][0], float).copy(), float(risk0[0]), True,
+                                 float(alt_risk[i]), i)
     xy = rollout_constant(state, cands[1:], n_steps, cfg.shield_dt_s, cfg.robot)
     wall_m, short, risk = check(xy)
     wall_m, short, risk = (np.concatenate(pair) for pair in ((wall0, wall_m), (short0, short), (risk0, risk)))

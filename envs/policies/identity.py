@@ -54,7 +54,7 @@ def artifact_digest(cfg: PolicyConfig) -> str | None:
 
 # MPCConfig fields added after records existed, with their defaults: left out of the fingerprint while at the
 # default, so that records made before a field existed still match a config that does not use it
-LATER_MPC_FIELDS: dict[str, Any] = {"spacetime": None, "n_starts": 1}
+LATER_MPC_FIELDS: dict[str, Any] = {"spacetime": None, "n_starts": 1, "guidance": None}
 
 
 def policy_identity(cfg: PolicyConfig) -> list[Any]:
