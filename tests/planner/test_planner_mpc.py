@@ -257,6 +257,7 @@ def test_initial_guess_is_the_cheapest_candidate_under_the_nlp_cost(goal):
     """The candidates' slacks and costs are evaluated in one mapped call each; the guess is the candidate that
     evaluating them one by one picks, bit for bit (with and without a previous plan among them)."""
     from planner import mpc as mpc_module
+    from planner.guidance import goal_rollouts
     from planner.ocp import pack_params
     from planner.scene import build_scene
 
@@ -266,7 +267,9 @@ def test_initial_guess_is_the_cheapest_candidate_under_the_nlp_cost(goal):
     for _ in range(2):  # the second time with the first plan's shifted copy as one more candidate
         ocp, layout = planner.ocp, planner.ocp.layout
         p = pack_params(ocp.sizes, state, goal, build_scene(state, pred, None, planner.config, goal))
-        states, controls = planner._goal_rollouts(state, goal, np.array(mpc_module.HEADING_OFFSETS_RAD))
+        offsets = np.array(mpc_module.HEADING_OFFSETS_RAD)
+        states, controls = goal_rollouts(state, goal, offsets, np.full(offsets.size, planner.config.robot.max_speed_mps),
+                                         planner.config)
         cands = list(zip(states, controls, strict=True))
         if planner._plan is not None:
             cands.insert(0, (np.vstack([state, planner._plan.states[1:]]), planner._plan.controls))
