@@ -134,10 +134,12 @@ class GuidanceConfig:
     min_winding_deg: float = 10.0  # the bearing must turn at least this much over the horizon to count as a side
     risk_weight: float = 20.0  # path cost per metre of shortfall below the MPC's clearance, summed over knots
     hold_discount: float = 0.1  # a plan that keeps the last applied plan's passing sides costs this fraction less
+    max_iter: int = 25  # iteration cap of a guided solve (one that needs more is dropped: plan-time budget)
 
     def __post_init__(self) -> None:
-        if self.n_paths < 1:
-            raise ValueError(f"GuidanceConfig.n_paths must be >= 1, got {self.n_paths!r}")
+        for name in ("n_paths", "max_iter"):
+            if not (isinstance(getattr(self, name), int) and getattr(self, name) >= 1):
+                raise ValueError(f"GuidanceConfig.{name} must be an integer >= 1, got {getattr(self, name)!r}")
         if not self.heading_offsets_deg or not self.speed_fractions:
             raise ValueError("GuidanceConfig.heading_offsets_deg and speed_fractions must not be empty")
         for name, values in (("heading_offsets_deg", self.heading_offsets_deg),

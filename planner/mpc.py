@@ -246,7 +246,7 @@ class MPCPlanner:
             w0 = np.zeros(layout.n)
             w0[layout.z], w0[layout.u] = paths[c], path_controls[c]
             w0[layout.s.ravel()] = ocp.slack_fn(w0, guided).full().ravel()
-            t = self._solve_from(w0, guided)
+            t = self._solve_from(w0, guided, guided=True)
             if np.all(np.isfinite(t.w)):
                 slack = float(ocp.slack_fn(t.w, p).full().max(initial=0.0))
                 cost = float(ocp.cost_fn(t.w, p))
@@ -258,13 +258,15 @@ class MPCPlanner:
             out.append(t)
         return out
 
-    def _solve_from(self, w0: np.ndarray, p: np.ndarray) -> _Try:
-        """One solve of the NLP from the initial guess ``w0``, classified (``_classify``)."""
+    def _solve_from(self, w0: np.ndarray, p: np.ndarray, guided: bool = False) -> _Try:
+        """One solve of the NLP from the initial guess ``w0``, classified (``_classify``); ``guided``: with the guidance
+        layer's iteration cap."""
         ocp = self.ocp
+        solver = ocp.guided_solver if guided and ocp.guided_solver is not None else ocp.solver
         start = time.perf_counter()
-        sol = ocp.solver(x0=w0, p=p, lbx=ocp.lbx, ubx=ocp.ubx, lbg=ocp.lbg, ubg=ocp.ubg)
+        sol = solver(x0=w0, p=p, lbx=ocp.lbx, ubx=ocp.ubx, lbg=ocp.lbg, ubg=ocp.ubg)
         elapsed = time.perf_counter() - start
-        stats = ocp.solver.stats()
+        stats = solver.stats()
         w = sol["x"].full().ravel()
         solver_status = str(stats.get("return_status", stats.get("unified_return_status", "")))
         finite = bool(np.all(np.isfinite(w)))

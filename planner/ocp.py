@@ -34,7 +34,7 @@ Hard constraints: z_0 equals the measured state, velocity and acceleration bound
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -368,7 +368,8 @@ def _solver_options(cfg: MPCConfig, b: _Builder) -> dict:
 
 @dataclass(frozen=True)
 class OCP:
-    """A built NLP: ``solver`` (casadi nlpsol Function), ``slack_fn(w, p) -> minimal slacks ((H+1)*ns)``,
+    """A built NLP: ``solver`` (casadi nlpsol Function; ``guided_solver`` the same with the guidance layer's
+    iteration cap), ``slack_fn(w, p) -> minimal slacks ((H+1)*ns)``,
     ``cost_fn(w, p) -> objective``, variable layout, bounds, and sizes."""
 
     solver: ca.Function
@@ -380,6 +381,7 @@ class OCP:
     ubx: np.ndarray
     lbg: np.ndarray
     ubg: np.ndarray
+    guided_solver: ca.Function | None = None  # with guidance: the same NLP, capped at GuidanceConfig.max_iter
 
 
 def build_ocp(cfg: MPCConfig) -> OCP:
@@ -399,6 +401,10 @@ def build_ocp(cfg: MPCConfig) -> OCP:
     nlp = {"x": w, "p": b.p, "f": b.cost, "g": ca.vertcat(*b.g)}
     opts = _solver_options(cfg, b)
     solver = compiled_nlpsol("mpc", cfg.solver, nlp, opts, ca.nlpsol("mpc", cfg.solver, nlp, opts))
+    guided = None
+    if cfg.guidance is not None:
+        capped = _solver_options(replace(cfg, max_iter=cfg.guidance.max_iter), b)
+        guided = compiled_nlpsol("mpc", cfg.solver, nlp, capped, ca.nlpsol("mpc", cfg.solver, nlp, capped))
     slack_fn = ca.Function("slack_min", [w, b.p], [ca.vertcat(*b.slack_min)])
     cost_fn = ca.Function("cost", [w, b.p], [b.cost])
-    return OCP(solver, slack_fn, cost_fn, layout, sz, lbx, ubx, np.array(b.lbg), np.array(b.ubg))
+    return OCP(solver, slack_fn, cost_fn, layout, sz, lbx, ubx, np.array(b.lbg), np.array(b.ubg), guided)
