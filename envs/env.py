@@ -290,10 +290,11 @@ class CrowdNavEnv(gym.Env):
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def annotate(self, plan: np.ndarray | None = None, predictions: np.ndarray | None = None,
-                 predicted_group_id: np.ndarray | None = None) -> None:
-        """Attach a policy's plan (H + 1, 2) and predictions (K, T, N, 2) / groups (N,) (rows of
-        `pedestrians()`) to the frames drawn from now on."""
-        self._annotations = {"plan": plan, "predictions": predictions, "predicted_group_id": predicted_group_id}
+                 predicted_group_id: np.ndarray | None = None, options: np.ndarray | None = None) -> None:
+        """Attach a policy's plan (H + 1, 2), predictions (K, T, N, 2) / groups (N,) (rows of `pedestrians()`) and
+        other passing options (O, H + 1, 2) to the frames drawn from now on."""
+        self._annotations = {"plan": plan, "predictions": predictions, "predicted_group_id": predicted_group_id,
+                             "options": options}
 
     def frame(self, scalars: dict[str, float] | None = None) -> SceneFrame:
         """The current scene for the renderer and the rerun observer."""
@@ -308,7 +309,7 @@ class CrowdNavEnv(gym.Env):
             robot_radius_m=self.config.robot.radius_m, goal=self.goal.copy(), ped_pos=p.pos, ped_vel=p.vel,
             ped_radius=p.radius, group_id=p.group_id, ped_id=p.ped_id, walls=self.crowd.walls,
             bounds=self.crowd.bounds, plan=ann.get("plan"), predictions=preds if ok else None,
-            predicted_group_id=pgroups if ok else None, scalars=dict(scalars or {}),
+            predicted_group_id=pgroups if ok else None, scalars=dict(scalars or {}), options=ann.get("options"),
         )
 
     # ---------------------------------------------------------------------------------- internals

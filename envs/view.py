@@ -70,7 +70,8 @@ class Decision:
     control: (2,) in the robot's units (unicycle: v m/s, omega rad/s; holonomic: vx, vy m/s), from planners.
     action: (2,) in [-1, 1] (the env's action space), from learned agents.
     plan: (H + 1, 2) m, the planned robot path; predictions: (K, T, N, 2) m sampled futures of the view's
-    pedestrians; predicted_group_id: (N,). When all three are None the frames keep the previous annotations
+    pedestrians; predicted_group_id: (N,); options: (O, H + 1, 2) m, the planner's other passing options (the
+    guidance layer's solved plans, planner/guidance.py). When all are None the frames keep the previous annotations
     (a planner holding its plan between re-plans).
     """
 
@@ -79,6 +80,7 @@ class Decision:
     plan: np.ndarray | None = None
     predictions: np.ndarray | None = None
     predicted_group_id: np.ndarray | None = None
+    options: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if (self.control is None) == (self.action is None):
@@ -90,7 +92,8 @@ class Decision:
     @property
     def annotated(self) -> bool:
         """Whether the decision carries annotations for the renderer."""
-        return self.plan is not None or self.predictions is not None or self.predicted_group_id is not None
+        return (self.plan is not None or self.predictions is not None or self.predicted_group_id is not None
+                or self.options is not None)
 
 
 def action_command(a0: float, a1: float, robot: RobotConfig) -> np.ndarray:

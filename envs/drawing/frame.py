@@ -33,6 +33,7 @@ class SceneFrame:
         predictions: (K, T, N, 2) predicted pedestrian positions at +0.4 s ... (rows match ped_pos), or None.
         predicted_group_id: (N,) the predictor's group ids, or None.
         scalars: named per-step numbers (reward terms, distances) to plot over time.
+        options: (O, H + 1, 2) the planner's other passing options (planned positions), or None.
     """
 
     step: int
@@ -51,6 +52,7 @@ class SceneFrame:
     predictions: np.ndarray | None = None
     predicted_group_id: np.ndarray | None = None
     scalars: dict[str, float] = field(default_factory=dict)
+    options: np.ndarray | None = None
 
     @property
     def robot_pos(self) -> np.ndarray:

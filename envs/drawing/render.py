@@ -14,7 +14,7 @@ Conventions:
       an outline for three or more). Predictions are thin polylines from each pedestrian's current position,
       in its group colour faded towards the background. The robot is a dark disc with a light heading tick
       (heading = state[2] for the unicycle, the velocity direction for the holonomic (x, y, vx, vy) state);
-      its goal is a dark X; its plan a dark 2 px polyline.
+      its goal is a dark X; its plan a dark 2 px polyline, the planner's other passing options grey 1 px ones.
     * Validation: non-finite values in the robot state, goal, pedestrian positions or radii raise ValueError.
       Non-finite points of the plan or the predictions are skipped (segments touching them are not drawn),
       as are non-finite walls.
@@ -34,6 +34,7 @@ WALL = np.array([70, 70, 70], dtype=np.uint8)
 ROBOT = np.array([35, 35, 35], dtype=np.uint8)
 HEADING = np.array([250, 250, 250], dtype=np.uint8)
 PLAN = np.array([20, 20, 20], dtype=np.uint8)
+OPTION = np.array([140, 140, 140], dtype=np.uint8)
 GOAL = np.array([20, 20, 20], dtype=np.uint8)
 PREDICTION_FADE = 0.45  # fraction of the background mixed into a prediction's group colour
 VIEW_MARGIN = 0.05  # default view = bounds grown by this fraction of their larger side on every side
@@ -245,6 +246,8 @@ def validate_frame(frame: SceneFrame) -> None:
             raise ValueError(f"SceneFrame.predictions must be (K, T, {n}, 2), got {shape}")
     if frame.plan is not None and (np.ndim(frame.plan) != 2 or np.shape(frame.plan)[1] != 2):
         raise ValueError(f"SceneFrame.plan must be (H + 1, 2), got {np.shape(frame.plan)}")
+    if frame.options is not None and (np.ndim(frame.options) != 3 or np.shape(frame.options)[2] != 2):
+        raise ValueError(f"SceneFrame.options must be (O, H + 1, 2), got {np.shape(frame.options)}")
 
 
 def render_rgb(frame: SceneFrame, size_px: int = 480, view: tuple | None = None) -> np.ndarray:
@@ -295,6 +298,9 @@ def render_rgb(frame: SceneFrame, size_px: int = 480, view: tuple | None = None)
     cross = np.array([[-arm, -arm], [arm, arm], [-arm, arm], [arm, -arm]]) + goal
     _draw_segments(img, cross[[0, 2]], cross[[1, 3]], GOAL, thickness=2)
 
+    for option in () if frame.options is None else np.asarray(frame.options, dtype=float):
+        a, b = _polyline_segments(world_to_pixel(option, vp))
+        _draw_segments(img, a, b, OPTION, thickness=1)
     if frame.plan is not None and len(frame.plan) >= 2:
         a, b = _polyline_segments(world_to_pixel(np.asarray(frame.plan, dtype=float), vp))
         _draw_segments(img, a, b, PLAN, thickness=2)

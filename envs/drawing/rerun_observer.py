@@ -15,6 +15,8 @@ Entities (timelines `step`, a sequence, and `sim_time`, a duration in s):
                             or the velocity for the holonomic (x, y, vx, vy) state).
     world/goal              Points2D.
     world/plan              LineStrips2D, one strip: the planned positions (non-finite points dropped).
+    world/options           LineStrips2D, one strip per other passing option of the planner (the guidance layer's
+                            solved plans not chosen; options with a non-finite point dropped).
     world/predictions       LineStrips2D, one strip per (sample k, pedestrian n), in the order k * N + n: the
                             pedestrian's current position followed by its T predicted positions; class id = its
                             ground-truth group id. Strips with a non-finite point are dropped.
@@ -50,6 +52,7 @@ WALL_COLOUR = (200, 200, 200)
 ROBOT_COLOUR = (240, 240, 240)
 GOAL_COLOUR = (255, 255, 255)
 PLAN_COLOUR = (255, 255, 255)
+OPTION_COLOUR = (150, 150, 150)
 PREDICTED_GROUP_COLOUR = (160, 160, 160)
 MAX_CLASS_ID = 65535  # rerun class ids are uint16
 
@@ -148,6 +151,11 @@ class RerunObserver:
             plan = plan[np.isfinite(plan).all(axis=1)]
         self._put("world/plan", plan is not None and len(plan) >= 2, lambda: rr.LineStrips2D(
             [_flip(plan)], radii=0.04, colors=[PLAN_COLOUR]))
+
+        options = [] if frame.options is None else [o for o in np.asarray(frame.options, dtype=float)
+                                                     if len(o) >= 2 and np.isfinite(o).all()]
+        self._put("world/options", len(options) > 0, lambda: rr.LineStrips2D(
+            [_flip(o) for o in options], radii=0.02, colors=[OPTION_COLOUR]))
 
         strips, strip_gid = self._prediction_strips(frame, pos, gid)
         self._put("world/predictions", len(strips) > 0, lambda: rr.LineStrips2D(

@@ -175,7 +175,7 @@ def decide(policy: Policy, env: CrowdNavEnv) -> Decision:
                                    future_s=getattr(policy, "future_s", 0.0),
                                    track=getattr(policy, "reads_track", False)))
     if decision.annotated:
-        env.annotate(decision.plan, decision.predictions, decision.predicted_group_id)
+        env.annotate(decision.plan, decision.predictions, decision.predicted_group_id, decision.options)
     return decision
 
 
@@ -214,8 +214,9 @@ class PlannerPolicy:
         result = self.planner.plan(view.robot_state, view.goal, prediction, view.walls)
         self._control = result.control
         samples = prediction.positions if prediction.n_peds else None
+        options = np.array([o[:, :2] for o in result.options[1:]]) if len(result.options) > 1 else None
         return Decision(control=self._control, plan=result.states[:, :2], predictions=samples,
-                        predicted_group_id=prediction.group_ids if prediction.n_peds else None)
+                        predicted_group_id=prediction.group_ids if prediction.n_peds else None, options=options)
 
 
 class GPGraphPolicy(PlannerPolicy):

@@ -13,6 +13,7 @@ from envs.drawing.render import (
     BACKGROUND,
     GOAL,
     HEADING,
+    OPTION,
     PLAN,
     PREDICTION_FADE,
     ROBOT,
@@ -128,6 +129,17 @@ def test_plan_is_drawn_only_when_given():
     with_plan = _frame(plan=plan)
     assert tuple(render_rgb(with_plan, size_px=200)[_pixel(probe, with_plan)]) == tuple(PLAN)
     assert tuple(render_rgb(_frame(), size_px=200)[_pixel(probe, with_plan)]) == tuple(BACKGROUND)
+
+
+def test_passing_options_are_drawn_grey_under_the_plan():
+    plan = np.stack([np.linspace(2.0, 2.0, 6), np.linspace(2.0, 9.0, 6)], axis=1)
+    option = plan + [4.0, 0.0]
+    frame = _frame(plan=plan, options=option[None])
+    img = render_rgb(frame, size_px=200)
+    assert tuple(img[_pixel([6.0, 5.5], frame)]) == tuple(OPTION)
+    assert tuple(img[_pixel([2.0, 5.5], frame)]) == tuple(PLAN)
+    with pytest.raises(ValueError, match="options"):
+        render_rgb(_frame(options=option), size_px=200)
 
 
 def test_predictions_are_drawn_only_when_given_in_a_faded_group_colour():

@@ -31,6 +31,7 @@ def _episode() -> list[SceneFrame]:
             predictions=pos + rng.normal(0.0, 1.0, (K, T, len(pos), 2)),
             predicted_group_id=np.array([0, 0, 1, 1, 2, 2]),
             scalars={"reward": 0.5 * t, "min dist": 10.0 - t},
+            options=np.stack([np.linspace(1, 9, 5), np.linspace(3, 9, 5)], axis=1)[None] + t if t < 2 else None,
         ))
     return frames
 
@@ -129,6 +130,15 @@ def test_plan_is_logged_while_present_then_cleared_once(recorded):
         np.testing.assert_array_equal(np.array(strip, dtype=np.float32), _flip(frame.plan))
     clears = [step for step, c in zip(plan["step"], plan.get("Clear:is_recursive", []), strict=True) if c is not None]
     assert clears == [PLAN_STEPS]
+
+
+def test_passing_options_are_logged_while_present(recorded):
+    frames, data = recorded
+    opts = data["/world/options"]
+    logged = [s for s in opts["LineStrips2D:strips"] if s is not None]
+    assert len(logged) == 2
+    for frame, (strip,) in zip(frames, logged, strict=False):
+        np.testing.assert_array_equal(np.array(strip, dtype=np.float32), _flip(frame.options[0]))
 
 
 def test_prediction_strips_one_per_sample_and_pedestrian(recorded):
