@@ -133,7 +133,7 @@ def test_plan_is_drawn_only_when_given():
 
 def test_passing_options_are_drawn_grey_under_the_plan():
     plan = np.stack([np.linspace(2.0, 2.0, 6), np.linspace(2.0, 9.0, 6)], axis=1)
-    option = plan + [4.0, 0.0]
+    option = plan + np.array([4.0, 0.0])
     frame = _frame(plan=plan, options=option[None])
     img = render_rgb(frame, size_px=200)
     assert tuple(img[_pixel([6.0, 5.5], frame)]) == tuple(OPTION)

@@ -46,7 +46,7 @@ def test_paths_passing_a_person_on_opposite_sides_get_opposite_signs_and_a_far_p
     cfg = make_config(guidance=GuidanceConfig())
     pred = _oncoming()
     scene = build_scene(np.zeros(5), pred, None, cfg, GOAL)
-    paths = np.concatenate([_straight(1.5), _straight(-1.5), _straight(1.5) + [0.0, 30.0, 0, 0, 0]])
+    paths = np.concatenate([_straight(1.5), _straight(-1.5), _straight(1.5) + np.array([0.0, 30.0, 0.0, 0.0, 0.0])])
     gaps = ped_gaps(checked_points(paths, 1), scene)
     now = np.full((cfg.max_peds, 2), 1e3)
     now[0] = pred.current[0]
