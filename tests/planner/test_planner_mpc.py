@@ -268,8 +268,8 @@ def test_initial_guess_is_the_cheapest_candidate_under_the_nlp_cost(goal):
         ocp, layout = planner.ocp, planner.ocp.layout
         p = pack_params(ocp.sizes, state, goal, build_scene(state, pred, None, planner.config, goal))
         offsets = np.array(mpc_module.HEADING_OFFSETS_RAD)
-        states, controls = goal_rollouts(state, goal, offsets, np.full(offsets.size, planner.config.robot.max_speed_mps),
-                                         planner.config)
+        speeds = np.full(offsets.size, planner.config.robot.max_speed_mps)
+        states, controls = goal_rollouts(state, goal, offsets, speeds, planner.config)
         cands = list(zip(states, controls, strict=True))
         if planner._plan is not None:
             cands.insert(0, (np.vstack([state, planner._plan.states[1:]]), planner._plan.controls))
