@@ -16,6 +16,7 @@ collisions with its members included); goals reached.
     python bench/bench_planner.py            # 300 steps per configuration, a few minutes
     python bench/bench_planner.py --quick    # 40 steps per configuration
     python bench/bench_planner.py --crowd    # the env's planner.CROWD_MPC at max_peds 8 and 12, side by side
+    python bench/bench_planner.py --guidance # CROWD_MPC without and with the guidance layer (1 and 2 paths)
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planner import CROWD_MPC, MPCConfig, MPCPlanner, PedPrediction, step_robot
+from planner import CROWD_MPC, GuidanceConfig, MPCConfig, MPCPlanner, PedPrediction, step_robot
 
 HALL_M = np.array([[-2.0, -5.0], [14.0, 5.0]])  # lower-left, upper-right corners
 GOALS = np.array([[0.0, 0.0], [12.0, 0.0]])
@@ -164,14 +165,37 @@ def crowd_comparison(steps: int, seed: int) -> None:
               f"| {a['collisions']} / {b['collisions']} |", flush=True)
 
 
+def guidance_comparison(steps: int, seed: int) -> None:
+    """planner.CROWD_MPC without the guidance layer and with it (1 and 2 guided solves beside the free one), side by
+    side on the same crowds: plan() CPU p50/p95 and their ratio to CROWD_MPC."""
+    print(f"CROWD_MPC (fatrop, K = {CROWD_MPC.n_modes}, shield on) without / with guidance, {steps} steps, seed {seed}")
+    print("| peds | config | plan() CPU p50 / p95 ms | ratio p50 / p95 | plan() wall p95 ms | steps in collision "
+          "| goals |")
+    print("|---|---|---|---|---|---|---|")
+    configs = {"CROWD_MPC": CROWD_MPC,
+               "+ guidance, 1 path": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=1)),
+               "+ guidance, 2 paths": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=2))}
+    for n_peds in (20, 40, 60):
+        rows = {name: run_case("fatrop", n_peds, cfg.n_modes, steps, seed, cfg) for name, cfg in configs.items()}
+        ref = rows["CROWD_MPC"]
+        for name, r in rows.items():
+            print(f"| {n_peds} | {name} | {r['cpu_p50']:.1f} / {r['cpu_p95']:.1f} | {r['cpu_p50'] / ref['cpu_p50']:.2f}"
+                  f" / {r['cpu_p95'] / ref['cpu_p95']:.2f} | {r['p95']:.1f} | {r['collisions']} | {r['goals']} |",
+                  flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="40 steps per configuration")
     parser.add_argument("--steps", type=int, default=300, help="closed-loop steps per configuration")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--crowd", action="store_true", help="only the CROWD_MPC max_peds 8 vs 12 comparison")
+    parser.add_argument("--guidance", action="store_true", help="only CROWD_MPC without / with the guidance layer")
     args = parser.parse_args(argv)
     steps = 40 if args.quick else args.steps
+    if args.guidance:
+        guidance_comparison(steps, args.seed)
+        return
     if args.crowd:
         crowd_comparison(steps, args.seed)
         return
