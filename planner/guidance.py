@@ -14,7 +14,8 @@ several problems, each told which side to pass each nearby person on, and keeps 
    turns over the horizon (the winding angle against their medoid future): +1 left, -1 right, 0 not passed (under
    ``min_winding_deg``, or never within ``relevance_m`` of the path). Paths with the same sides are one option.
 4. **Options**: paths in order of cost, each kept only if it passes someone on the other side from every path kept
-   before it and from the free solve's plan; the first ``n_paths`` kept become guided solves.
+   before it and from the free solve's plan, and never one that comes nearer a wall than the MPC's wall clearance;
+   the first ``n_paths`` kept become guided solves.
 5. **Half-planes** (:func:`half_planes`): for a guided solve, each person within ``relevance_m`` of its path gets,
    at every checked time and mode, the constraint ``n . (p - q) >= clearance`` with ``n`` the unit vector from the
    person's predicted position q to the path's point: the plan stays on the path's side of everyone near it (and
@@ -97,11 +98,16 @@ def path_costs(states: np.ndarray, goal: np.ndarray, scene: SceneArrays, cfg: MP
     d = np.sqrt(((states[:, 1:, :2] - goal) ** 2).sum(-1) + HUBER_M**2) - HUBER_M  # (C, H)
     cost = w.goal * d.sum(-1) + w.goal_terminal * d[:, -1]
     short = np.maximum(-np.where(np.isfinite(gaps), gaps, 0.0), 0.0).mean(-1).sum((-1, -2))
-    real = scene.wall_mask > 0
-    if real.any():
-        wall = point_segment_distances(states[:, 1:, :2], scene.walls[real]).min(-1)  # (C, H)
-        short = short + np.maximum(cfg.wall_clearance_m - wall, 0.0).sum(-1)
+    short = short + np.maximum(cfg.wall_clearance_m - wall_distances(states, scene), 0.0).sum(-1)
     return cost + cfg.guidance.risk_weight * short
+
+
+def wall_distances(states: np.ndarray, scene: SceneArrays) -> np.ndarray:
+    """(C, H) m: each path's (C, H+1, nz) knots' distance to the nearest constrained wall (+inf without walls)."""
+    real = scene.wall_mask > 0
+    if not real.any():
+        return np.full(states[:, 1:, 0].shape, np.inf)
+    return point_segment_distances(states[:, 1:, :2], scene.walls[real]).min(-1)
 
 
 def passing_sides(states: np.ndarray, now: np.ndarray, scene: SceneArrays, gaps: np.ndarray,
@@ -129,11 +135,12 @@ def contradicts(a: np.ndarray, b: np.ndarray) -> bool:
 
 def pick_options(costs: np.ndarray, sides: np.ndarray, exclude: list[np.ndarray], n: int) -> list[int]:
     """Indices of at most n paths, cheapest first, each passing some person on the other side from every path picked
-    before it and from every row in `exclude` (each (M,): the free solves' sides). sides: (C, M), costs: (C,)."""
+    before it and from every row in `exclude` (each (M,): the free solves' sides). sides: (C, M), costs: (C,); a path
+    of infinite cost is never picked."""
     taken = list(exclude)
     picks: list[int] = []
     for c in np.argsort(costs, kind="stable"):
-        if len(picks) == n:
+        if len(picks) == n or not np.isfinite(costs[c]):  # inf: not an option (a path into a wall)
             break
         if all(contradicts(sides[c], other) for other in taken):
             taken.append(sides[c])

@@ -21,6 +21,7 @@ from planner.guidance import (
     ped_gaps,
     pick_options,
     side_map,
+    wall_distances,
 )
 from planner.lanes import LaneKeeper
 from planner.ocp import OCP, build_ocp, pack_params, param_slices
@@ -238,6 +239,7 @@ class MPCPlanner:
         labelled = {id(t): side_map(s, scene.ped_index) for t, s in zip(finite, sides[len(paths):], strict=True)}
         out = [replace(t, sides=labelled.get(id(t))) for t in free]
         costs = path_costs(paths, goal, scene, cfg, gaps[: len(paths)])
+        costs = np.where((wall_distances(paths, scene) >= cfg.wall_clearance_m).all(-1), costs, np.inf)
         slices = param_slices(ocp.sizes)
         for c in pick_options(costs, sides[: len(paths)], list(sides[len(paths):]), cfg.guidance.n_paths):
             normal, on = half_planes(paths[c], scene, gaps[c], cfg, state[:2])

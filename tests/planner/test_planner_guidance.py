@@ -64,6 +64,8 @@ def test_options_each_pass_someone_on_the_other_side_cheapest_first():
         assert contradicts(sides[a], np.array([1, 1]))
         assert all(contradicts(sides[a], sides[b]) for b in picks[:i])
     assert pick_options(costs, sides, [], 1) == [0]
+    walled = np.where(np.arange(6) == 2, np.inf, costs)  # the path into a wall is never an option
+    assert pick_options(walled, sides, [np.array([1, 1])], 3) == [3, 4]
 
 
 def test_keeping_sides_means_contradicting_none():
