@@ -150,7 +150,7 @@ def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_pat
     from envs.evaluation.episode import fingerprint
     plain = PolicyConfig("random")
     before = plain.to_json()
-    for later in ("spacetime", "n_starts"):  # added to MPCConfig later, left out at their defaults (LATER_MPC_FIELDS)
+    for later in ("spacetime", "n_starts", "guidance"):  # added to MPCConfig later, left out at their defaults
         before["mpc"].pop(later)
     assert episode_fingerprint(suite, cell, plain) == fingerprint(suite.name, suite.version, cell.spec,
                                                                   cell.defaults, before)
@@ -170,6 +170,34 @@ def test_a_record_made_before_the_latest_planner_fields_still_resumes():
     cell = next(c for c in suite.cells if c.name == "plaza-low-invisible")
     pcfg = PolicyConfig("mpc-oracle", mpc=_replace(suite.mpc_config(ENV_MPC), time_budget_s=10.0))
     assert episode_fingerprint(suite, cell, pcfg) == "a6cc028e0ee80bc8"
+
+
+def test_removing_the_layers_not_adopted_kept_every_fingerprint():
+    """The fingerprints of these configs, computed at b01ea5a, before the layers tried and not adopted left MPCConfig
+    (docs/decisions/planner-settings.md, "Removed layers"): REMOVED_MPC_FIELDS puts their default values back, so
+    every record made while they existed still resumes and merges."""
+    from dataclasses import fields
+    from dataclasses import replace as _replace
+
+    from envs.evaluation.benchmark import episode_fingerprint
+    from envs.evaluation.suite import load_suite
+    from envs.policies.identity import REMOVED_MPC_FIELDS
+    from envs.policies.registry import ENV_MPC
+    from planner import GuidanceConfig, MPCConfig
+
+    assert not set(REMOVED_MPC_FIELDS) & {f.name for f in fields(MPCConfig)}
+    suite = load_suite("crowdnav-v1")
+    cell = next(c for c in suite.cells if c.name == "plaza-low-invisible")
+    pinned = [
+        (PolicyConfig("mpc-cv"), "85ab016336c7b17e"),
+        (PolicyConfig("mpc-gpgraph"), "fbd7eb8330090683"),
+        (PolicyConfig("random"), "02c2adb228459bf0"),
+        (PolicyConfig("random+shield"), "575bc8487bd92fb3"),
+        (PolicyConfig("mpc-oracle", mpc=suite.mpc_config(ENV_MPC)), "9cbb75a6e76294d3"),
+        (PolicyConfig("mpc-cv", mpc=_replace(ENV_MPC, guidance=GuidanceConfig(), n_starts=2)), "a808e0e3e8f70e7a"),
+    ]
+    for pcfg, expected in pinned:
+        assert episode_fingerprint(suite, cell, pcfg) == expected, pcfg.name
 
 
 def test_record_store_skips_a_partial_line_and_appends_after_it(tmp_path):
