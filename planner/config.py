@@ -156,32 +156,6 @@ class GuidanceConfig:
 
 
 @dataclass(frozen=True)
-class LaneConfig:
-    """Settings of the lane layer (planner/lanes.py); metres, metres per second."""
-
-    lookahead_m: float = 6.0  # pedestrians this far ahead along the goal direction count
-    carrot_m: float = 3.0  # the lane subgoal's distance ahead
-    min_goal_distance_m: float = 4.0  # nearer the goal than this, head straight for it
-    max_offset_m: float = 2.0  # largest lateral offset tried, each side
-    offset_step_m: float = 0.25  # spacing of the offsets tried
-    kernel_m: float = 0.6  # lateral standard deviation of one pedestrian's footprint
-    min_speed_mps: float = 0.3  # walking against the robot faster than this counts as oncoming
-    other_weight: float = 0.25  # weight of a pedestrian not oncoming (oncoming: 1)
-    straight_weight: float = 0.1  # cost per metre of lateral offset
-    switch_weight: float = 0.3  # cost per metre of change from the last offset
-    wall_extra_m: float = 0.3  # the carrot line keeps the MPC's wall clearance plus this
-
-    def __post_init__(self) -> None:
-        for name in ("lookahead_m", "carrot_m", "offset_step_m", "kernel_m"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"LaneConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("min_goal_distance_m", "max_offset_m", "min_speed_mps", "other_weight", "straight_weight",
-                     "switch_weight", "wall_extra_m"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ValueError(f"LaneConfig.{name} must be >= 0, got {getattr(self, name)!r}")
-
-
-@dataclass(frozen=True)
 class MPCConfig:
     """Sizes, timing and solver choice of the MPC. Sizes are fixed when the problem is built."""
 
@@ -249,8 +223,6 @@ class MPCConfig:
     shield_group_margin_m: float = 0.2  # surface clearance kept from a group's region, m (the env's group_space_m)
     # -- global route (planner/route.py); None (default): head straight for the goal -------------------------
     route: RouteConfig | None = None
-    # -- lane layer (planner/lanes.py); None (default): no lateral offset from the goal line --------------------
-    lane: LaneConfig | None = None
     # -- space-time search layer (planner/spacetime.py); None (default): off --------------------------------------
     spacetime: SpaceTimeConfig | None = None
     # -- guidance layer (planner/guidance.py); None (default): one free solve, the MPC before 2026-11-28 ----------

@@ -22,7 +22,6 @@ from planner.guidance import (
     pick_options,
     side_map,
 )
-from planner.lanes import LaneKeeper
 from planner.ocp import OCP, build_ocp, pack_params, param_slices
 from planner.prediction import PedPrediction, current_positions, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
@@ -109,8 +108,6 @@ class MPCPlanner:
         self._sides: dict[int, int] = {}  # guidance: the passing sides of the last applied plan (input row -> side)
         self._options: list[tuple[np.ndarray, np.ndarray, dict[int, int] | None]] = []  # other solved plans, best first
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
-        lane = self.config.lane
-        self.lanes = LaneKeeper(lane, self.config.wall_clearance_m) if lane is not None else None
         st, cfg = self.config.spacetime, self.config
         self.spacetime = None if st is None else SpaceTimeSearch(st, cfg.robot.max_speed_mps,
                                                                  cfg.horizon_steps * cfg.dt_s, cfg.robot.radius_m,
@@ -124,8 +121,6 @@ class MPCPlanner:
         self._sides, self._options = {}, []
         if self.router is not None:
             self.router.reset()
-        if self.lanes is not None:
-            self.lanes.reset()
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
              obstacles: np.ndarray | list | None = None) -> PlanResult:
@@ -156,14 +151,12 @@ class MPCPlanner:
     def _subgoal(self, state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
                  obstacles: np.ndarray | None) -> np.ndarray:
         """The point the solve heads for: the goal; with a route (``config.route``) and walls, the route's subgoal
-        (planner/route.py); with a lane layer (``config.lane``) and the goal in sight, the lane's (planner/lanes.py)."""
+        (planner/route.py)."""
         subgoal = goal
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
         if self.spacetime is not None:
             subgoal = self.spacetime.subgoal(state[:2], subgoal, prediction, obstacles)
-        if self.lanes is not None and np.array_equal(subgoal, goal):
-            subgoal = self.lanes.subgoal(state[:2], goal, prediction, obstacles)
         return subgoal
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:

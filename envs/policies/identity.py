@@ -58,7 +58,7 @@ LATER_MPC_FIELDS: dict[str, Any] = {"spacetime": None, "n_starts": 1, "guidance"
 # MPCConfig fields removed after records existed (layers tried and not adopted, docs/decisions/planner-settings.md,
 # "Removed layers"), with the JSON value each had at its default (every record's: they were off in every suite): put
 # back into the fingerprinted config, so that the fingerprints of records made while they existed do not change
-REMOVED_MPC_FIELDS: dict[str, Any] = {}
+REMOVED_MPC_FIELDS: dict[str, Any] = {"lane": None}
 
 
 def policy_identity(cfg: PolicyConfig) -> list[Any]:

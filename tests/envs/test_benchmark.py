@@ -148,10 +148,12 @@ def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_pat
         plan_benchmark(suite, [cell], [pcfg], tmp_path, recorded=[old])
     # policies that load no weights keep the fingerprint they had before digests existed
     from envs.evaluation.episode import fingerprint
+    from envs.policies.identity import LATER_MPC_FIELDS, REMOVED_MPC_FIELDS
     plain = PolicyConfig("random")
     before = plain.to_json()
-    for later in ("spacetime", "n_starts", "guidance"):  # added to MPCConfig later, left out at their defaults
+    for later in LATER_MPC_FIELDS:  # added to MPCConfig later, left out at their defaults
         before["mpc"].pop(later)
+    before["mpc"].update(REMOVED_MPC_FIELDS)  # removed from MPCConfig later, put back at their defaults
     assert episode_fingerprint(suite, cell, plain) == fingerprint(suite.name, suite.version, cell.spec,
                                                                   cell.defaults, before)
 
