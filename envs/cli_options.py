@@ -21,7 +21,7 @@ from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
-from planner import GuidanceConfig, RouteConfig, SpaceTimeConfig
+from planner import GuidanceConfig, RouteConfig
 
 if TYPE_CHECKING:
     from envs.evaluation.suite import Suite
@@ -163,8 +163,7 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-NESTED = {"route": RouteConfig,  # --mpc FIELD=default gives these configs
-          "spacetime": SpaceTimeConfig, "guidance": GuidanceConfig}
+NESTED = {"route": RouteConfig, "guidance": GuidanceConfig}  # --mpc FIELD=default gives these configs
 
 
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:

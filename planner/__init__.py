@@ -30,7 +30,6 @@ from planner.config import (
     MPCConfig,
     RobotConfig,
     RouteConfig,
-    SpaceTimeConfig,
 )
 from planner.dynamics import brake_control, clip_control, model_dims, robot_dynamics, rollout, step_robot
 from planner.mpc import MPCPlanner
@@ -64,7 +63,6 @@ __all__ = [
     "RouteConfig",
     "Router",
     "SocialForcePlanner",
-    "SpaceTimeConfig",
     "brake_control",
     "clip_control",
     "constant_velocity_prediction",

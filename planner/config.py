@@ -102,27 +102,6 @@ class RouteConfig:
 
 
 @dataclass(frozen=True)
-class SpaceTimeConfig:
-    """Settings of the space-time search layer (planner/spacetime.py); metres, seconds."""
-
-    cell_m: float = 0.15  # grid cell side
-    step_s: float = 0.4  # time between the reachable sets (the predictor's step: no interpolation)
-    clearance_m: float = 0.1  # kept beyond robot radius + person radius from every predicted sample
-    goal_reach_m: float = 0.5  # a reachable cell this near the goal makes the goal the subgoal
-    lead_s: float = 1.6  # the subgoal is the searched path's point this far ahead
-    spread_inflation: float = 0.5  # clearance added per metre of the samples' RMS spread about their mean, m/m
-    max_inflation_m: float = 0.5  # cap on that inflation, m
-
-    def __post_init__(self) -> None:
-        for name in ("cell_m", "step_s", "goal_reach_m", "lead_s"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"SpaceTimeConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("clearance_m", "spread_inflation", "max_inflation_m"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ValueError(f"SpaceTimeConfig.{name} must be >= 0, got {getattr(self, name)!r}")
-
-
-@dataclass(frozen=True)
 class GuidanceConfig:
     """Settings of the guidance layer (planner/guidance.py): passing options searched in space-time, each held by
     half-planes in its own solve; metres, seconds, degrees."""
@@ -223,8 +202,6 @@ class MPCConfig:
     shield_group_margin_m: float = 0.2  # surface clearance kept from a group's region, m (the env's group_space_m)
     # -- global route (planner/route.py); None (default): head straight for the goal -------------------------
     route: RouteConfig | None = None
-    # -- space-time search layer (planner/spacetime.py); None (default): off --------------------------------------
-    spacetime: SpaceTimeConfig | None = None
     # -- guidance layer (planner/guidance.py); None (default): one free solve, the MPC before 2026-11-28 ----------
     guidance: GuidanceConfig | None = None
 

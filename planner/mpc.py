@@ -28,7 +28,6 @@ from planner.result import PlanResult, PlanStats
 from planner.route import Router
 from planner.scene import FAR_M, SceneArrays, build_scene, validate_obstacles
 from planner.shield import shield_control
-from planner.spacetime import SpaceTimeSearch
 
 IPOPT_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 HEADING_OFFSETS_RAD = (0.0, -0.6, 0.6, -1.2, 1.2)  # first-guess directions relative to the goal
@@ -108,10 +107,6 @@ class MPCPlanner:
         self._sides: dict[int, int] = {}  # guidance: the passing sides of the last applied plan (input row -> side)
         self._options: list[tuple[np.ndarray, np.ndarray, dict[int, int] | None]] = []  # other solved plans, best first
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
-        st, cfg = self.config.spacetime, self.config
-        self.spacetime = None if st is None else SpaceTimeSearch(st, cfg.robot.max_speed_mps,
-                                                                 cfg.horizon_steps * cfg.dt_s, cfg.robot.radius_m,
-                                                                 cfg.wall_clearance_m - cfg.robot.radius_m)
 
     def reset(self) -> None:
         """Forget the stored plan (warm start and fallback), the shield's last command and the route; keep the
@@ -155,8 +150,6 @@ class MPCPlanner:
         subgoal = goal
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
-        if self.spacetime is not None:
-            subgoal = self.spacetime.subgoal(state[:2], subgoal, prediction, obstacles)
         return subgoal
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:

@@ -368,15 +368,16 @@ def test_an_episode_recorded_as_an_error_is_retried_on_resume_and_the_exit_says_
 
 
 def test_an_mpc_field_added_later_stays_out_of_the_fingerprint_at_its_default():
-    """Records made before `MPCConfig.spacetime` existed still resume: at its default the field is not fingerprinted;
-    set, it is."""
+    """Records made before `MPCConfig.guidance` existed still resume: at its default the field is not fingerprinted;
+    set, it is. A field removed later (`lane`, which predates the v7 records) is fingerprinted at its old default;
+    `spacetime`, added and removed since, is in none."""
     from envs.policies.identity import policy_identity
-    from planner import SpaceTimeConfig
+    from planner import GuidanceConfig
 
     plain = policy_identity(PolicyConfig("mpc-cv"))[0]["mpc"]
-    assert "spacetime" not in plain and "lane" in plain  # lane predates the v7 records: it stays
-    searched = policy_identity(PolicyConfig("mpc-cv", mpc=replace(ENV_MPC, spacetime=SpaceTimeConfig())))[0]["mpc"]
-    assert searched["spacetime"] is not None
+    assert "guidance" not in plain and "spacetime" not in plain and plain["lane"] is None
+    guided = policy_identity(PolicyConfig("mpc-cv", mpc=replace(ENV_MPC, guidance=GuidanceConfig())))[0]["mpc"]
+    assert guided["guidance"] is not None
 
 
 def test_smoke_routes_fit_in_its_episodes():
