@@ -173,12 +173,6 @@ class MPCConfig:
     clearance_growth_mps: float = 0.0  # clearance added per second of prediction time, m/s
     spread_inflation: float = 0.0  # clearance added per metre of sample spread (RMS about the mean), m/m
     max_clearance_inflation_m: float = 0.5  # cap on the two inflations above, m
-    # Speed cap near people: v <= speed_cap_min_mps + speed_cap_gain_per_s * gap (gap: surface distance, m, to
-    # the nearest pedestrian ahead now or predicted within speed_cap_lookahead_s); inf gain = no cap.
-    speed_cap_gain_per_s: float = float("inf")
-    speed_cap_min_mps: float = 0.3
-    speed_cap_half_angle_deg: float = 90.0  # "ahead": bearing within this angle of the heading, deg
-    speed_cap_lookahead_s: float = 0.0
     # -- safety shield (planner/shield.py); shield_horizon_s = 0 (default) turns it off ---------------------
     # The plan's first control is checked against every predicted sample at the control rate; if more than
     # shield_max_risk of the samples come within shield_margin_m within shield_horizon_s, a safer constant
@@ -220,18 +214,14 @@ class MPCConfig:
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         _check_name("pedestrian ranking", self.rank_peds_by, RANKINGS)
-        _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m",
-                                   "speed_cap_min_mps", "speed_cap_lookahead_s"))
-        _check_positive(self, ("speed_cap_gain_per_s", "shield_dt_s", "shield_tau_s"))
+        _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))
+        _check_positive(self, ("shield_dt_s", "shield_tau_s"))
         _check_non_negative(self, ("shield_horizon_s", "shield_margin_m", "shield_hold_weight", "shield_group_weight",
                                    "shield_group_margin_m"))
         if not math.isfinite(self.shield_group_weight):
             raise ValueError(f"MPCConfig.shield_group_weight must be finite, got {self.shield_group_weight!r}")
         if not 0.0 <= self.shield_max_risk <= 1.0:
             raise ValueError(f"MPCConfig.shield_max_risk must be in [0, 1], got {self.shield_max_risk!r}")
-        if not 0.0 < self.speed_cap_half_angle_deg <= 180.0:
-            raise ValueError(f"MPCConfig.speed_cap_half_angle_deg must be in (0, 180], got "
-                             f"{self.speed_cap_half_angle_deg!r}")
         if self.horizon_steps < 2:
             raise ValueError(f"MPCConfig.horizon_steps must be >= 2, got {self.horizon_steps}")
         if self.dt_s * self.robot.max_yaw_rate_radps > 2.0:
