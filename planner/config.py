@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 
 ROBOT_MODELS = ("unicycle", "holonomic")
 SOLVERS = ("ipopt", "fatrop")
-RANKINGS = ("distance", "predicted")
 
 
 def _check_name(kind: str, name: str, valid: tuple[str, ...]) -> None:
@@ -167,9 +166,6 @@ class MPCConfig:
     n_starts: int = 1
     verbose: bool = False
     # -- crowd risk (planner/risk.py); the defaults leave the plain MPC above unchanged --------------------
-    # Which M pedestrians are constrained: "distance" (nearest now) or "predicted" (closest to the robot's
-    # reference path over the horizon, any sample).
-    rank_peds_by: str = "distance"
     clearance_growth_mps: float = 0.0  # clearance added per second of prediction time, m/s
     spread_inflation: float = 0.0  # clearance added per metre of sample spread (RMS about the mean), m/m
     max_clearance_inflation_m: float = 0.5  # cap on the two inflations above, m
@@ -213,7 +209,6 @@ class MPCConfig:
             _check_non_negative(self, ("wall_margin_m",))
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
-        _check_name("pedestrian ranking", self.rank_peds_by, RANKINGS)
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))
         _check_positive(self, ("shield_dt_s", "shield_tau_s"))
         _check_non_negative(self, ("shield_horizon_s", "shield_margin_m", "shield_hold_weight", "shield_group_weight",

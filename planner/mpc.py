@@ -175,8 +175,7 @@ class MPCPlanner:
     # -- solving -------------------------------------------------------------------------------
     def _solve(self, state, goal, prediction, obstacles) -> PlanResult:
         cfg, ocp = self.config, self.ocp
-        reference = self._plan.states[:, :2] if self._plan is not None else None
-        scene = build_scene(state, prediction, obstacles, cfg, reference)
+        scene = build_scene(state, prediction, obstacles, cfg)
         if scene.start_penetration_m > 0.0:  # already overlapping someone: infeasible as posed
             depth = scene.start_penetration_m
             return self._fallback(state, "infeasible", "start in collision", 0.0, 0, depth)

@@ -1,19 +1,13 @@
-"""Crowd-risk helpers of the scene builder (numpy only): which pedestrians to constrain and how much to inflate
-their clearance.
+"""Crowd-risk helpers of the scene builder (numpy only): how much to inflate the pedestrians' clearance.
 
-* **Ranking** (:func:`predicted_gaps`): with ``MPCConfig.rank_peds_by == "predicted"`` the M constrained
-  pedestrians are those that come closest to the robot's reference path (the shifted previous plan, or the
-  robot coasting at its current velocity) at the same time, over all samples and the horizon, instead of the
-  M nearest now. A pedestrian walking at the robot from behind or the side is then constrained even in a
-  dense crowd where eight others stand closer.
 * **Clearance inflation** (:func:`clearance_inflation`): at a checked time t (s) the clearance of a pedestrian
   grows by ``clearance_growth_mps * t + spread_inflation * spread(t)``, capped at
   ``max_clearance_inflation_m``; spread(t) is the root-mean-square distance (m) of the predictor's samples
   from their mean at t (0 now). Both are chance-constraint-like margins: the later and the less certain a
   predicted position, the wider the berth.
 
-A speed cap near people was here until 2026-11-28: tried, not adopted, removed (docs/decisions/planner-settings.md,
-"Removed layers").
+A speed cap near people and a ranking of the pedestrians by predicted risk were here until 2026-11-28: tried, not
+adopted, removed (docs/decisions/planner-settings.md, "Removed layers"). The MPC constrains the nearest M.
 """
 
 from __future__ import annotations
@@ -43,23 +37,3 @@ def clearance_inflation(spread: np.ndarray, cfg: MPCConfig, sub_dt_s: float) -> 
     t = sub_dt_s * np.arange(1, spread.shape[0] + 1)[:, None]
     extra = cfg.clearance_growth_mps * t + cfg.spread_inflation * spread
     return np.minimum(extra, cfg.max_clearance_inflation_m)
-
-
-def predicted_gaps(stage_samples: np.ndarray, now: np.ndarray, reference_xy: np.ndarray) -> np.ndarray:
-    """Smallest centre distance (m) per pedestrian (N,) between samples (S, H, N, 2) / current positions
-    (N, 2) and the robot's reference path (H+1, 2) at the same times (row 0 = now)."""
-    d_now = np.linalg.norm(now - reference_xy[0], axis=-1)
-    if stage_samples.shape[1] == 0:
-        return d_now
-    diff = stage_samples - reference_xy[None, 1: stage_samples.shape[1] + 1, None, :]
-    d_pred = np.sqrt((diff * diff).sum(-1)).min(axis=(0, 1))
-    return np.minimum(d_now, d_pred)
-
-
-def coast_reference(state: np.ndarray, model: str, dt_s: float, h: int) -> np.ndarray:
-    """(H+1, 2) positions of the robot keeping its current velocity (straight line)."""
-    if model == "unicycle":
-        vel = state[3] * np.array([np.cos(state[2]), np.sin(state[2])])
-    else:
-        vel = state[2:4]
-    return state[:2] + dt_s * np.arange(h + 1)[:, None] * vel

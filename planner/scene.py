@@ -29,13 +29,7 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.prediction import PedPrediction, current_positions
-from planner.risk import (
-    clearance_inflation,
-    coast_reference,
-    predicted_gaps,
-    resample_scalar,
-    sample_spread,
-)
+from planner.risk import clearance_inflation, resample_scalar, sample_spread
 
 FAR_M = 1.0e3  # padding entries are placed this far from the robot
 
@@ -230,14 +224,11 @@ def _start_penetration(robot_xy, now, radii, real, obstacles, robot_radius: floa
     return depth
 
 
-def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | None, cfg: MPCConfig,
-                reference_xy: np.ndarray | None = None) -> SceneArrays:
+def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | None, cfg: MPCConfig) -> SceneArrays:
     """Fixed-size MPC arrays from the robot state (state_dim,) (or just its position (2,)), a validated
-    prediction and obstacle segments (S, 4) or None. ``reference_xy`` (H+1, 2) m (the robot's expected path;
-    default: coasting at its current velocity) is used by the crowd-risk ranking."""
+    prediction and obstacle segments (S, 4) or None; metres."""
     state = np.asarray(state, float)
     robot_xy = state[:2]
-    full_state = state if state.size > 2 else np.r_[robot_xy, np.zeros(model_state_pad(cfg))]
     h, m, k = cfg.horizon_steps, cfg.max_peds, cfg.n_modes
     sub = 2 if cfg.check_midpoints else 1
     mask = np.asarray(pred.mask, bool)
@@ -247,14 +238,7 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     dist = np.linalg.norm(now - robot_xy, axis=1)
     real = np.flatnonzero(mask)
     raw = np.where(mask[None, None, :, None], np.asarray(pred.positions, float), 0.0)
-    need_samples = cfg.rank_peds_by == "predicted"
-    samples = resample_in_time(raw, now, pred.step_s, cfg.dt_s, h) if need_samples and real.size else None
-    if cfg.rank_peds_by == "predicted" and real.size:
-        ref = coast_reference(full_state, cfg.robot.model, cfg.dt_s, h) if reference_xy is None else reference_xy
-        rank = predicted_gaps(samples[:, :, real], now[real], np.asarray(ref, float)) - radii[real]
-        order = real[np.argsort(rank, kind="stable")][:m]
-    else:
-        order = real[np.argsort(dist[real], kind="stable")][:m]
+    order = real[np.argsort(dist[real], kind="stable")][:m]
     groups = _nearest_groups(group_ids, mask, dist, cfg.max_groups)
     used = np.zeros_like(mask)
     used[order] = True
@@ -275,11 +259,6 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     walls, wall_mask, wall_side = _nearest_walls(obstacles, robot_xy, cfg.max_walls)
     depth = _start_penetration(robot_xy, now, radii, real, obstacles, cfg.robot.radius_m)
     return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, wall_side, order, depth)
-
-
-def model_state_pad(cfg: MPCConfig) -> int:
-    """State entries after (x, y): 3 for the unicycle (heading, v, omega), 2 for the holonomic robot."""
-    return 3 if cfg.robot.model == "unicycle" else 2
 
 
 def validate_obstacles(obstacles) -> np.ndarray | None:

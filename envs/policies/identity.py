@@ -59,7 +59,7 @@ LATER_MPC_FIELDS: dict[str, Any] = {"n_starts": 1, "guidance": None}  # ("spacet
 # "Removed layers"), with the JSON value each had at its default (every record's: they were off in every suite): put
 # back into the fingerprinted config, so that the fingerprints of records made while they existed do not change
 REMOVED_MPC_FIELDS: dict[str, Any] = {
-    "lane": None,
+    "lane": None, "rank_peds_by": "distance",
     "speed_cap_gain_per_s": "inf", "speed_cap_min_mps": 0.3, "speed_cap_half_angle_deg": 90.0,
     "speed_cap_lookahead_s": 0.0,
 }
