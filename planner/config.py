@@ -179,17 +179,6 @@ class MPCConfig:
     shield_max_risk: float = 0.1  # largest accepted fraction of hit samples, in [0, 1]
     shield_tau_s: float = 0.8  # time constant of the discount on later violations, s
     shield_cv: bool = True  # also avoid the last observed velocity held (needs prediction.history)
-    # commitment: when the shield replaced the previous control, candidates pay this much (m of discounted
-    # violation per unit of normalised control change) for leaving that command, so that an evasive manoeuvre
-    # is not swapped for its mirror image every 0.1 s; 0 = no commitment
-    shield_hold_weight: float = 0.0
-    # groups: when the shield replaces the plan's control, candidates also pay this weight times their discounted
-    # shortfall below shield_group_margin_m from a predicted group's region (the capsule of its members' discs, as
-    # the MPC's group constraint; groups of >= 2, no wider than max_group_span_m), so that an evasive command does
-    # not cut through a group when a command as safe passes round it; 0 = groups ignored (the shield before
-    # 2026-11-27)
-    shield_group_weight: float = 0.0
-    shield_group_margin_m: float = 0.2  # surface clearance kept from a group's region, m (the env's group_space_m)
     # -- global route (planner/route.py); None (default): head straight for the goal -------------------------
     route: RouteConfig | None = None
     # -- guidance layer (planner/guidance.py); None (default): one free solve, the MPC before 2026-11-28 ----------
@@ -211,10 +200,7 @@ class MPCConfig:
                                    "max_plan_reuse_steps"))
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))
         _check_positive(self, ("shield_dt_s", "shield_tau_s"))
-        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m", "shield_hold_weight", "shield_group_weight",
-                                   "shield_group_margin_m"))
-        if not math.isfinite(self.shield_group_weight):
-            raise ValueError(f"MPCConfig.shield_group_weight must be finite, got {self.shield_group_weight!r}")
+        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m"))
         if not 0.0 <= self.shield_max_risk <= 1.0:
             raise ValueError(f"MPCConfig.shield_max_risk must be in [0, 1], got {self.shield_max_risk!r}")
         if self.horizon_steps < 2:

@@ -102,17 +102,14 @@ class MPCPlanner:
         self.ocp: OCP = shared_ocp(self.config)
         self.stats = PlanStats()
         self._plan: _Plan | None = None
-        self._shielded: np.ndarray | None = None  # the command the shield applied last step, if it replaced one
         self._mapped: dict[int, tuple] = {}  # `_maps`
         self._sides: dict[int, int] = {}  # guidance: the passing sides of the last applied plan (input row -> side)
         self._options: list[tuple[np.ndarray, np.ndarray, dict[int, int] | None]] = []  # other solved plans, best first
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
 
     def reset(self) -> None:
-        """Forget the stored plan (warm start and fallback), the shield's last command and the route; keep the
-        stats."""
+        """Forget the stored plan (warm start and fallback), the passing options and the route; keep the stats."""
         self._plan = None
-        self._shielded = None
         self._sides, self._options = {}, []
         if self.router is not None:
             self.router.reset()
@@ -158,12 +155,10 @@ class MPCPlanner:
         start = time.perf_counter()
         options = self._options if result.status == "solved" else []
         try:
-            verdict = shield_control(state, result.controls, prediction, obstacles, self.config, self._shielded,
+            verdict = shield_control(state, result.controls, prediction, obstacles, self.config,
                                      np.array([controls for _, controls, _ in options]) if options else None)
         except Exception:  # the plan's own control is still a valid (if unchecked) answer
-            self._shielded = None
             return result
-        self._shielded = verdict.control.copy() if verdict.replaced and verdict.option < 0 else None
         elapsed = time.perf_counter() - start
         if verdict.option >= 0:  # another passing option's plan is safe where the chosen one is not: apply it
             states, controls, sides = options[verdict.option]

@@ -61,7 +61,7 @@ LATER_MPC_FIELDS: dict[str, Any] = {"n_starts": 1, "guidance": None}  # ("spacet
 REMOVED_MPC_FIELDS: dict[str, Any] = {
     "lane": None, "rank_peds_by": "distance",
     "speed_cap_gain_per_s": "inf", "speed_cap_min_mps": 0.3, "speed_cap_half_angle_deg": 90.0,
-    "speed_cap_lookahead_s": 0.0,
+    "speed_cap_lookahead_s": 0.0, "shield_hold_weight": 0.0, "shield_group_weight": 0.0, "shield_group_margin_m": 0.2,
 }
 
 
