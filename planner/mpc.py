@@ -128,7 +128,7 @@ class MPCPlanner:
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
         routed = time.perf_counter()
         try:
-            subgoal = self._subgoal(state, goal, prediction, obstacles)
+            subgoal = self._subgoal(state, goal, obstacles)
             routed = time.perf_counter() - routed
             result = self._solve(state, subgoal, prediction, obstacles)
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
@@ -140,8 +140,7 @@ class MPCPlanner:
         self.stats.record(result)
         return result
 
-    def _subgoal(self, state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
-                 obstacles: np.ndarray | None) -> np.ndarray:
+    def _subgoal(self, state: np.ndarray, goal: np.ndarray, obstacles: np.ndarray | None) -> np.ndarray:
         """The point the solve heads for: the goal; with a route (``config.route``) and walls, the route's subgoal
         (planner/route.py)."""
         subgoal = goal
