@@ -21,7 +21,7 @@ from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
-from planner import GuidanceConfig, LaneConfig, RouteConfig, SpaceTimeConfig
+from planner import GuidanceConfig, RouteConfig
 
 if TYPE_CHECKING:
     from envs.evaluation.suite import Suite
@@ -163,14 +163,13 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-NESTED = {"route": RouteConfig, "lane": LaneConfig,  # --mpc FIELD=default gives these configs
-          "spacetime": SpaceTimeConfig, "guidance": GuidanceConfig}
+NESTED = {"route": RouteConfig, "guidance": GuidanceConfig}  # --mpc FIELD=default gives these configs
 
 
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
     """The value of one --mpc FIELD=VALUE: a scalar of the field's type, `none` for an optional field, and for
-    `route` and `lane` one of none (no global route, no lane layer) or default (`planner.RouteConfig()`,
-    `planner.LaneConfig()`)."""
+    the nested configs (`NESTED`: `route`, `guidance`) one of none (e.g. no global route) or default (e.g.
+    `planner.RouteConfig()`)."""
     if optional and text.lower() == "none":
         return None
     if key in NESTED:

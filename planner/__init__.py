@@ -27,11 +27,9 @@ from planner.config import (
     SOLVERS,
     CostWeights,
     GuidanceConfig,
-    LaneConfig,
     MPCConfig,
     RobotConfig,
     RouteConfig,
-    SpaceTimeConfig,
 )
 from planner.dynamics import brake_control, clip_control, model_dims, robot_dynamics, rollout, step_robot
 from planner.mpc import MPCPlanner
@@ -55,7 +53,6 @@ __all__ = [
     "CostWeights",
     "FrozenMPC",
     "GuidanceConfig",
-    "LaneConfig",
     "MPCConfig",
     "MPCPlanner",
     "PedPrediction",
@@ -66,7 +63,6 @@ __all__ = [
     "RouteConfig",
     "Router",
     "SocialForcePlanner",
-    "SpaceTimeConfig",
     "brake_control",
     "clip_control",
     "constant_velocity_prediction",

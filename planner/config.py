@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 
 ROBOT_MODELS = ("unicycle", "holonomic")
 SOLVERS = ("ipopt", "fatrop")
-RANKINGS = ("distance", "predicted")
 
 
 def _check_name(kind: str, name: str, valid: tuple[str, ...]) -> None:
@@ -102,27 +101,6 @@ class RouteConfig:
 
 
 @dataclass(frozen=True)
-class SpaceTimeConfig:
-    """Settings of the space-time search layer (planner/spacetime.py); metres, seconds."""
-
-    cell_m: float = 0.15  # grid cell side
-    step_s: float = 0.4  # time between the reachable sets (the predictor's step: no interpolation)
-    clearance_m: float = 0.1  # kept beyond robot radius + person radius from every predicted sample
-    goal_reach_m: float = 0.5  # a reachable cell this near the goal makes the goal the subgoal
-    lead_s: float = 1.6  # the subgoal is the searched path's point this far ahead
-    spread_inflation: float = 0.5  # clearance added per metre of the samples' RMS spread about their mean, m/m
-    max_inflation_m: float = 0.5  # cap on that inflation, m
-
-    def __post_init__(self) -> None:
-        for name in ("cell_m", "step_s", "goal_reach_m", "lead_s"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"SpaceTimeConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("clearance_m", "spread_inflation", "max_inflation_m"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ValueError(f"SpaceTimeConfig.{name} must be >= 0, got {getattr(self, name)!r}")
-
-
-@dataclass(frozen=True)
 class GuidanceConfig:
     """Settings of the guidance layer (planner/guidance.py): passing options searched in space-time, each held by
     half-planes in its own solve; metres, seconds, degrees."""
@@ -153,32 +131,6 @@ class GuidanceConfig:
                 raise ValueError(f"GuidanceConfig.{name} must be >= 0, got {getattr(self, name)!r}")
         if not 0.0 <= self.hold_discount < 1.0:
             raise ValueError(f"GuidanceConfig.hold_discount must be in [0, 1), got {self.hold_discount!r}")
-
-
-@dataclass(frozen=True)
-class LaneConfig:
-    """Settings of the lane layer (planner/lanes.py); metres, metres per second."""
-
-    lookahead_m: float = 6.0  # pedestrians this far ahead along the goal direction count
-    carrot_m: float = 3.0  # the lane subgoal's distance ahead
-    min_goal_distance_m: float = 4.0  # nearer the goal than this, head straight for it
-    max_offset_m: float = 2.0  # largest lateral offset tried, each side
-    offset_step_m: float = 0.25  # spacing of the offsets tried
-    kernel_m: float = 0.6  # lateral standard deviation of one pedestrian's footprint
-    min_speed_mps: float = 0.3  # walking against the robot faster than this counts as oncoming
-    other_weight: float = 0.25  # weight of a pedestrian not oncoming (oncoming: 1)
-    straight_weight: float = 0.1  # cost per metre of lateral offset
-    switch_weight: float = 0.3  # cost per metre of change from the last offset
-    wall_extra_m: float = 0.3  # the carrot line keeps the MPC's wall clearance plus this
-
-    def __post_init__(self) -> None:
-        for name in ("lookahead_m", "carrot_m", "offset_step_m", "kernel_m"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"LaneConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("min_goal_distance_m", "max_offset_m", "min_speed_mps", "other_weight", "straight_weight",
-                     "switch_weight", "wall_extra_m"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ValueError(f"LaneConfig.{name} must be >= 0, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -214,18 +166,9 @@ class MPCConfig:
     n_starts: int = 1
     verbose: bool = False
     # -- crowd risk (planner/risk.py); the defaults leave the plain MPC above unchanged --------------------
-    # Which M pedestrians are constrained: "distance" (nearest now) or "predicted" (closest to the robot's
-    # reference path over the horizon, any sample).
-    rank_peds_by: str = "distance"
     clearance_growth_mps: float = 0.0  # clearance added per second of prediction time, m/s
     spread_inflation: float = 0.0  # clearance added per metre of sample spread (RMS about the mean), m/m
     max_clearance_inflation_m: float = 0.5  # cap on the two inflations above, m
-    # Speed cap near people: v <= speed_cap_min_mps + speed_cap_gain_per_s * gap (gap: surface distance, m, to
-    # the nearest pedestrian ahead now or predicted within speed_cap_lookahead_s); inf gain = no cap.
-    speed_cap_gain_per_s: float = float("inf")
-    speed_cap_min_mps: float = 0.3
-    speed_cap_half_angle_deg: float = 90.0  # "ahead": bearing within this angle of the heading, deg
-    speed_cap_lookahead_s: float = 0.0
     # -- safety shield (planner/shield.py); shield_horizon_s = 0 (default) turns it off ---------------------
     # The plan's first control is checked against every predicted sample at the control rate; if more than
     # shield_max_risk of the samples come within shield_margin_m within shield_horizon_s, a safer constant
@@ -236,23 +179,8 @@ class MPCConfig:
     shield_max_risk: float = 0.1  # largest accepted fraction of hit samples, in [0, 1]
     shield_tau_s: float = 0.8  # time constant of the discount on later violations, s
     shield_cv: bool = True  # also avoid the last observed velocity held (needs prediction.history)
-    # commitment: when the shield replaced the previous control, candidates pay this much (m of discounted
-    # violation per unit of normalised control change) for leaving that command, so that an evasive manoeuvre
-    # is not swapped for its mirror image every 0.1 s; 0 = no commitment
-    shield_hold_weight: float = 0.0
-    # groups: when the shield replaces the plan's control, candidates also pay this weight times their discounted
-    # shortfall below shield_group_margin_m from a predicted group's region (the capsule of its members' discs, as
-    # the MPC's group constraint; groups of >= 2, no wider than max_group_span_m), so that an evasive command does
-    # not cut through a group when a command as safe passes round it; 0 = groups ignored (the shield before
-    # 2026-11-27)
-    shield_group_weight: float = 0.0
-    shield_group_margin_m: float = 0.2  # surface clearance kept from a group's region, m (the env's group_space_m)
     # -- global route (planner/route.py); None (default): head straight for the goal -------------------------
     route: RouteConfig | None = None
-    # -- lane layer (planner/lanes.py); None (default): no lateral offset from the goal line --------------------
-    lane: LaneConfig | None = None
-    # -- space-time search layer (planner/spacetime.py); None (default): off --------------------------------------
-    spacetime: SpaceTimeConfig | None = None
     # -- guidance layer (planner/guidance.py); None (default): one free solve, the MPC before 2026-11-28 ----------
     guidance: GuidanceConfig | None = None
 
@@ -270,19 +198,11 @@ class MPCConfig:
             _check_non_negative(self, ("wall_margin_m",))
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
-        _check_name("pedestrian ranking", self.rank_peds_by, RANKINGS)
-        _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m",
-                                   "speed_cap_min_mps", "speed_cap_lookahead_s"))
-        _check_positive(self, ("speed_cap_gain_per_s", "shield_dt_s", "shield_tau_s"))
-        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m", "shield_hold_weight", "shield_group_weight",
-                                   "shield_group_margin_m"))
-        if not math.isfinite(self.shield_group_weight):
-            raise ValueError(f"MPCConfig.shield_group_weight must be finite, got {self.shield_group_weight!r}")
+        _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))
+        _check_positive(self, ("shield_dt_s", "shield_tau_s"))
+        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m"))
         if not 0.0 <= self.shield_max_risk <= 1.0:
             raise ValueError(f"MPCConfig.shield_max_risk must be in [0, 1], got {self.shield_max_risk!r}")
-        if not 0.0 < self.speed_cap_half_angle_deg <= 180.0:
-            raise ValueError(f"MPCConfig.speed_cap_half_angle_deg must be in (0, 180], got "
-                             f"{self.speed_cap_half_angle_deg!r}")
         if self.horizon_steps < 2:
             raise ValueError(f"MPCConfig.horizon_steps must be >= 2, got {self.horizon_steps}")
         if self.dt_s * self.robot.max_yaw_rate_radps > 2.0:

@@ -23,14 +23,12 @@ from planner.guidance import (
     side_map,
     wall_distances,
 )
-from planner.lanes import LaneKeeper
 from planner.ocp import OCP, build_ocp, pack_params, param_slices
 from planner.prediction import PedPrediction, current_positions, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
 from planner.route import Router
 from planner.scene import FAR_M, SceneArrays, build_scene, validate_obstacles
 from planner.shield import shield_control
-from planner.spacetime import SpaceTimeSearch
 
 IPOPT_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 HEADING_OFFSETS_RAD = (0.0, -0.6, 0.6, -1.2, 1.2)  # first-guess directions relative to the goal
@@ -105,28 +103,17 @@ class MPCPlanner:
         self.ocp: OCP = shared_ocp(self.config)
         self.stats = PlanStats()
         self._plan: _Plan | None = None
-        self._shielded: np.ndarray | None = None  # the command the shield applied last step, if it replaced one
         self._mapped: dict[int, tuple] = {}  # `_maps`
         self._sides: dict[int, int] = {}  # guidance: the passing sides of the last applied plan (input row -> side)
         self._options: list[tuple[np.ndarray, np.ndarray, dict[int, int] | None]] = []  # other solved plans, best first
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
-        lane = self.config.lane
-        self.lanes = LaneKeeper(lane, self.config.wall_clearance_m) if lane is not None else None
-        st, cfg = self.config.spacetime, self.config
-        self.spacetime = None if st is None else SpaceTimeSearch(st, cfg.robot.max_speed_mps,
-                                                                 cfg.horizon_steps * cfg.dt_s, cfg.robot.radius_m,
-                                                                 cfg.wall_clearance_m - cfg.robot.radius_m)
 
     def reset(self) -> None:
-        """Forget the stored plan (warm start and fallback), the shield's last command and the route; keep the
-        stats."""
+        """Forget the stored plan (warm start and fallback), the passing options and the route; keep the stats."""
         self._plan = None
-        self._shielded = None
         self._sides, self._options = {}, []
         if self.router is not None:
             self.router.reset()
-        if self.lanes is not None:
-            self.lanes.reset()
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
              obstacles: np.ndarray | list | None = None) -> PlanResult:
@@ -142,7 +129,7 @@ class MPCPlanner:
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
         routed = time.perf_counter()
         try:
-            subgoal = self._subgoal(state, goal, prediction, obstacles)
+            subgoal = self._subgoal(state, goal, obstacles)
             routed = time.perf_counter() - routed
             result = self._solve(state, subgoal, prediction, obstacles)
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
@@ -154,17 +141,12 @@ class MPCPlanner:
         self.stats.record(result)
         return result
 
-    def _subgoal(self, state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
-                 obstacles: np.ndarray | None) -> np.ndarray:
+    def _subgoal(self, state: np.ndarray, goal: np.ndarray, obstacles: np.ndarray | None) -> np.ndarray:
         """The point the solve heads for: the goal; with a route (``config.route``) and walls, the route's subgoal
-        (planner/route.py); with a lane layer (``config.lane``) and the goal in sight, the lane's (planner/lanes.py)."""
+        (planner/route.py)."""
         subgoal = goal
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
-        if self.spacetime is not None:
-            subgoal = self.spacetime.subgoal(state[:2], subgoal, prediction, obstacles)
-        if self.lanes is not None and np.array_equal(subgoal, goal):
-            subgoal = self.lanes.subgoal(state[:2], goal, prediction, obstacles)
         return subgoal
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:
@@ -173,12 +155,10 @@ class MPCPlanner:
         start = time.perf_counter()
         options = self._options if result.status == "solved" else []
         try:
-            verdict = shield_control(state, result.controls, prediction, obstacles, self.config, self._shielded,
+            verdict = shield_control(state, result.controls, prediction, obstacles, self.config,
                                      np.array([controls for _, controls, _ in options]) if options else None)
         except Exception:  # the plan's own control is still a valid (if unchecked) answer
-            self._shielded = None
             return result
-        self._shielded = verdict.control.copy() if verdict.replaced and verdict.option < 0 else None
         elapsed = time.perf_counter() - start
         if verdict.option >= 0:  # another passing option's plan is safe where the chosen one is not: apply it
             states, controls, sides = options[verdict.option]
@@ -190,8 +170,7 @@ class MPCPlanner:
     # -- solving -------------------------------------------------------------------------------
     def _solve(self, state, goal, prediction, obstacles) -> PlanResult:
         cfg, ocp = self.config, self.ocp
-        reference = self._plan.states[:, :2] if self._plan is not None else None
-        scene = build_scene(state, prediction, obstacles, cfg, goal, reference)
+        scene = build_scene(state, prediction, obstacles, cfg)
         if scene.start_penetration_m > 0.0:  # already overlapping someone: infeasible as posed
             depth = scene.start_penetration_m
             return self._fallback(state, "infeasible", "start in collision", 0.0, 0, depth)

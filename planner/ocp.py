@@ -27,9 +27,7 @@ f(z_k, u_k, dt/2), which stays local to stage k and catches fast head-on passes 
   beyond it (signed by the side the robot is on now, where p projects inside the segment): a plan cannot jump
   through a wall between knots.
 
-Hard constraints: z_0 equals the measured state, velocity and acceleration bounds, and (only when
-``speed_cap_gain_per_s`` is finite) the per-stage speed cap ``v_k <= v_cap_k`` (unicycle) or
-``|u_k|² <= v_cap_k²`` (holonomic), with v_cap from planner/risk.py.
+Hard constraints: z_0 equals the measured state, velocity and acceleration bounds.
 """
 
 from __future__ import annotations
@@ -86,7 +84,6 @@ def param_shapes(sz: Sizes) -> dict[str, tuple[int, ...]]:
         "ped_pos": (sz.nt, sz.m, sz.k, 2), "ped_clear": (sz.nt, sz.m), "ped_mask": (sz.m,),
         "grp_a": (sz.nt, sz.g, sz.k, 2), "grp_b": (sz.nt, sz.g, sz.k, 2), "grp_clear": (sz.nt, sz.g, sz.k),
         "grp_mask": (sz.g,), "walls": (sz.w, 4), "wall_mask": (sz.w,), "wall_side": (sz.w,),
-        "v_cap": (sz.h,),
     }
     if sz.sides:
         shapes.update(ped_normal=(sz.nt, sz.m, sz.k, 2), ped_side=(sz.m,))
@@ -213,10 +210,6 @@ def _control_terms(b: _Builder, k: int) -> None:
     else:
         b.con(ca.dot(du, du), -np.inf, (cfg.robot.max_accel_mps2 * cfg.dt_s) ** 2, k)
         b.con(ca.dot(u, u), -np.inf, cfg.robot.max_speed_mps**2, k)
-    if np.isfinite(cfg.speed_cap_gain_per_s):  # speed cap near people (planner/risk.py), built only when on
-        lhs = u[0] if cfg.robot.model == "unicycle" else ca.dot(u, u)  # speed, or speed² (holonomic)
-        cap = b.par["v_cap"][k] if cfg.robot.model == "unicycle" else b.par["v_cap"][k] ** 2
-        b.con(lhs - cap, -np.inf, 1e-6, k)
     wts = cfg.weights
     b.cost += wts.effort * ca.sumsqr(u / ub) + wts.smoothness * ca.sumsqr(du / (accel * cfg.dt_s))
 

@@ -29,14 +29,7 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.prediction import PedPrediction, current_positions
-from planner.risk import (
-    clearance_inflation,
-    coast_reference,
-    predicted_gaps,
-    resample_scalar,
-    sample_spread,
-    speed_cap,
-)
+from planner.risk import clearance_inflation, resample_scalar, sample_spread
 
 FAR_M = 1.0e3  # padding entries are placed this far from the robot
 
@@ -58,7 +51,6 @@ class SceneArrays:
     wall_side: np.ndarray  # (W,) +1 / -1: the side of each wall's line the robot is on now (left of x1y1->x2y2: +1)
     ped_index: np.ndarray  # (m_real,) which input pedestrians fill the first rows
     start_penetration_m: float  # > 0 when the robot already overlaps a pedestrian or a wall now
-    v_cap: np.ndarray  # (H,) speed bound per stage, m/s (planner/risk.py; >= max speed when off)
 
 
 def _ped_sample_distances(positions: np.ndarray) -> np.ndarray:
@@ -232,14 +224,11 @@ def _start_penetration(robot_xy, now, radii, real, obstacles, robot_radius: floa
     return depth
 
 
-def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | None, cfg: MPCConfig,
-                goal: np.ndarray | None = None, reference_xy: np.ndarray | None = None) -> SceneArrays:
+def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | None, cfg: MPCConfig) -> SceneArrays:
     """Fixed-size MPC arrays from the robot state (state_dim,) (or just its position (2,)), a validated
-    prediction and obstacle segments (S, 4) or None. ``goal`` (2,) m and ``reference_xy`` (H+1, 2) m (the
-    robot's expected path; default: coasting at its current velocity) are used by the crowd-risk options."""
+    prediction and obstacle segments (S, 4) or None; metres."""
     state = np.asarray(state, float)
     robot_xy = state[:2]
-    full_state = state if state.size > 2 else np.r_[robot_xy, np.zeros(model_state_pad(cfg))]
     h, m, k = cfg.horizon_steps, cfg.max_peds, cfg.n_modes
     sub = 2 if cfg.check_midpoints else 1
     mask = np.asarray(pred.mask, bool)
@@ -249,14 +238,7 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     dist = np.linalg.norm(now - robot_xy, axis=1)
     real = np.flatnonzero(mask)
     raw = np.where(mask[None, None, :, None], np.asarray(pred.positions, float), 0.0)
-    need_samples = cfg.rank_peds_by == "predicted" or np.isfinite(cfg.speed_cap_gain_per_s)
-    samples = resample_in_time(raw, now, pred.step_s, cfg.dt_s, h) if need_samples and real.size else None
-    if cfg.rank_peds_by == "predicted" and real.size:
-        ref = coast_reference(full_state, cfg.robot.model, cfg.dt_s, h) if reference_xy is None else reference_xy
-        rank = predicted_gaps(samples[:, :, real], now[real], np.asarray(ref, float)) - radii[real]
-        order = real[np.argsort(rank, kind="stable")][:m]
-    else:
-        order = real[np.argsort(dist[real], kind="stable")][:m]
+    order = real[np.argsort(dist[real], kind="stable")][:m]
     groups = _nearest_groups(group_ids, mask, dist, cfg.max_groups)
     used = np.zeros_like(mask)
     used[order] = True
@@ -276,15 +258,7 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     grp = _group_arrays(stage_pos, radii, groups, robot_xy, cfg)
     walls, wall_mask, wall_side = _nearest_walls(obstacles, robot_xy, cfg.max_walls)
     depth = _start_penetration(robot_xy, now, radii, real, obstacles, cfg.robot.radius_m)
-    mean_stage = samples[:, :, real].mean(axis=0) if samples is not None else np.zeros((h, 0, 2))
-    goal = robot_xy + np.array([1.0, 0.0]) if goal is None else np.asarray(goal, float)
-    v_cap = speed_cap(full_state, goal, mean_stage, now[real], radii[real], cfg)
-    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, wall_side, order, depth, v_cap)
-
-
-def model_state_pad(cfg: MPCConfig) -> int:
-    """State entries after (x, y): 3 for the unicycle (heading, v, omega), 2 for the holonomic robot."""
-    return 3 if cfg.robot.model == "unicycle" else 2
+    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, wall_side, order, depth)
 
 
 def validate_obstacles(obstacles) -> np.ndarray | None:

@@ -18,14 +18,11 @@ samples it did not keep, a pedestrian can still reach the robot. The shield clos
    Its risk is the fraction of samples it hits.
 4. When the MPC's control has risk <= ``shield_max_risk``, it is kept. Otherwise the shield takes the candidate
    with the least time-discounted violation ``mean_k sum_t exp(-t / shield_tau_s) * relu(margin - clearance)``
-   (m). Ties go to the candidate nearest the MPC's control. With ``shield_hold_weight`` > 0 and a command the
-   shield applied at the previous step (``previous``), every candidate also pays that weight times its
-   normalised distance from it: an evasive manoeuvre is kept unless another is clearly safer. A candidate whose
+   (m). Ties go to the candidate nearest the MPC's control. A candidate whose
    body would touch a wall within the look-ahead is taken only when every candidate would (before 2026-11-25 wall
    contact was one more soft violation, and in dense corridors the shield steered the robot into the wall).
-   With ``shield_group_weight`` > 0 and the pedestrians' group ids, every candidate also pays that weight times its
-   discounted shortfall below ``shield_group_margin_m`` from each predicted group's region (`group_violations`), so
-   that among commands about as safe the one passing round a group wins over the one cutting through it.
+   A commitment to the last replacement command and a cost for passing through predicted groups were tried and
+   not adopted; they were removed on 2026-11-28 (docs/decisions/planner-settings.md, "Removed layers").
 
 With ``shield_cv`` (default) the pedestrians' last observed velocity, held over the look-ahead, is one more
 future that counts as certain (risk 1 when hit): at this range constant velocity is hard to beat, and a learned
@@ -46,7 +43,7 @@ import numpy as np
 from planner.config import MPCConfig, RobotConfig
 from planner.dynamics import _clip1, _clip_one, clip_control, step_numpy
 from planner.prediction import PedPrediction, current_positions
-from planner.scene import group_capsules, point_segment_distances, resample_in_time, wall_clearance
+from planner.scene import resample_in_time, wall_clearance
 
 N_SPEEDS = 5  # candidate forward speeds (unicycle) / speed magnitudes (holonomic), rest excluded
 N_TURNS = 9  # candidate yaw rates (unicycle) / directions (holonomic: 2 * N_TURNS)
@@ -264,58 +261,31 @@ def touches_wall(robot_xy: np.ndarray | None, walls: np.ndarray | None, robot_ra
     return ((wall_clearance(robot_xy, walls) if wall_m is None else wall_m) < robot_radius).any(-1)
 
 
-def group_violations(xy: np.ndarray, futures: np.ndarray, radii: np.ndarray, group_ids: np.ndarray,
-                     weights: np.ndarray, cfg: MPCConfig) -> np.ndarray:
-    """(C,) discounted shortfall (m) of roll-outs xy (C, T, 2) below ``cfg.shield_group_margin_m`` from the regions
-    of the groups in futures (K, T, n, 2) m with radii (n,) m and group_ids (n,): per group of >= 2 members, the
-    capsule of their discs at each (sample, time) as the MPC's group constraint builds it (`group_capsules`), skipped
-    where it is wider than ``cfg.max_group_span_m``; summed over groups of ``mean_k sum_t weights_t relu(shortfall)``
-    with weights (T,)."""
-    total = np.zeros(len(xy))
-    for gid in np.unique(group_ids):
-        members = np.flatnonzero(group_ids == gid)
-        if len(members) < 2:
-            continue
-        a, b, rad = group_capsules(futures[:, :, members], radii[members])  # (K, T, 2), (K, T, 2), (K, T)
-        seg = np.concatenate([a, b], axis=-1)[:, :, None]  # (K, T, 1, 4): one segment per sample and time
-        gap = point_segment_distances(xy[:, None], seg)[..., 0] - rad - cfg.robot.radius_m  # (C, K, T)
-        short = np.where(np.linalg.norm(b - a, axis=-1) > cfg.max_group_span_m, 0.0,
-                         np.maximum(cfg.shield_group_margin_m - gap, 0.0))
-        total += (short * weights).sum(-1).mean(-1)
-    return total
-
-
 def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
-                   walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None,
+                   walls: np.ndarray | None, cfg: MPCConfig,
                    alternatives: np.ndarray | None = None) -> ShieldVerdict:
     """Check the plan's controls (H, 2) (each held ``cfg.dt_s``; the first is the one to apply) from ``state``
     (state_dim,) against every predicted sample and wall; replace its first control by a constant command
-    when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring). ``previous`` (2,): the command
-    the shield applied at the previous step, if it replaced the plan's control there. ``alternatives`` (A, H, 2):
+    when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring). ``alternatives`` (A, H, 2):
     other plans from the same state (the guidance layer's other passing options), best first: when the plan fails
     the check, the first of them that passes it gives the control, before any constant command is tried."""
     futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, horizon_steps(cfg), cfg.shield_cv)
-    groups = np.asarray(prediction.group_ids)[np.asarray(prediction.mask, bool)] if cfg.shield_group_weight else None
-    return shield_futures(state, planned, futures, radii, walls, cfg, previous, certain_last=has_cv, group_ids=groups,
-                          alternatives=alternatives)
+    return shield_futures(state, planned, futures, radii, walls, cfg, certain_last=has_cv, alternatives=alternatives)
 
 
 def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, radii: np.ndarray,
-                   walls: np.ndarray | None, cfg: MPCConfig, previous: np.ndarray | None = None,
-                   certain_last: bool = False, group_ids: np.ndarray | None = None,
+                   walls: np.ndarray | None, cfg: MPCConfig, certain_last: bool = False,
                    alternatives: np.ndarray | None = None) -> ShieldVerdict:
     """`shield_control` on the pedestrians' futures (K, T, n, 2) m at the shield's own times (+shield_dt_s ..
     +T shield_dt_s, T = `horizon_steps(cfg)`) with radii (n,) m; `certain_last`: the last future counts as certain
-    (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1. `group_ids` (n,):
-    the pedestrians' groups, for ``cfg.shield_group_weight`` (None: groups ignored). `alternatives`: as in
-    `shield_control`."""
+    (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1. `alternatives`: as
+    in `shield_control`."""
     n_steps = horizon_steps(cfg)
     planned = np.asarray(planned, float)
     cands = candidate_controls(cfg.robot, planned[0])
     near = within_reach(np.asarray(state, float)[:2], futures, radii, cfg)
     # walls: the MPC's wall margin while nobody is within reach, else the pedestrians' (see the module docstring)
     wall_slack = 0.0 if near.any() else cfg.shield_margin_m - (cfg.wall_clearance_m - cfg.robot.radius_m)
-    all_futures, all_radii = futures, radii  # a group's region spans its members within reach and beyond
     futures, radii = futures[:, :, near], radii[near]
     n_sampled = len(futures) - certain_last
 
@@ -354,13 +324,6 @@ def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, 
     scale = np.array([cfg.robot.max_speed_mps, cfg.robot.max_yaw_rate_radps if cfg.robot.model == "unicycle"
                       else cfg.robot.max_speed_mps])
     cost = violation + DEVIATION_WEIGHT * (((cands - cands[0]) / scale) ** 2).sum(-1)
-    if previous is not None and cfg.shield_hold_weight > 0:
-        cost = cost + cfg.shield_hold_weight * np.sqrt((((cands - previous) / scale) ** 2).sum(-1))
     cost = cost + WALL_CONTACT_COST * touches_wall(None, walls, cfg.robot.radius_m, wall_m)
-    if cfg.shield_group_weight and group_ids is not None:
-        ids = np.asarray(group_ids)
-        grouped = np.isin(ids, ids[near])  # the groups with a member within reach, all their members
-        cost = cost + cfg.shield_group_weight * group_violations(
-            np.concatenate([xy0, xy]), all_futures[:, :, grouped], all_radii[grouped], ids[grouped], weights, cfg)
     best = int(np.argmin(cost))
     return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))

@@ -54,16 +54,25 @@ def artifact_digest(cfg: PolicyConfig) -> str | None:
 
 # MPCConfig fields added after records existed, with their defaults: left out of the fingerprint while at the
 # default, so that records made before a field existed still match a config that does not use it
-LATER_MPC_FIELDS: dict[str, Any] = {"spacetime": None, "n_starts": 1, "guidance": None}
+LATER_MPC_FIELDS: dict[str, Any] = {"n_starts": 1, "guidance": None}  # ("spacetime", removed: was None in all)
+# MPCConfig fields removed after records existed (layers tried and not adopted, docs/decisions/planner-settings.md,
+# "Removed layers"), with the JSON value each had at its default (every record's: they were off in every suite): put
+# back into the fingerprinted config, so that the fingerprints of records made while they existed do not change
+REMOVED_MPC_FIELDS: dict[str, Any] = {
+    "lane": None, "rank_peds_by": "distance",
+    "speed_cap_gain_per_s": "inf", "speed_cap_min_mps": 0.3, "speed_cap_half_angle_deg": 90.0,
+    "speed_cap_lookahead_s": 0.0, "shield_hold_weight": 0.0, "shield_group_weight": 0.0, "shield_group_margin_m": 0.2,
+}
 
 
 def policy_identity(cfg: PolicyConfig) -> list[Any]:
     """What identifies a policy in an episode fingerprint: its config (JSON, without the `LATER_MPC_FIELDS` at
-    their defaults) and, when it loads weight files, their digest (left out otherwise, so the fingerprints of such
-    policies are those made before digests)."""
+    their defaults, with the `REMOVED_MPC_FIELDS` at theirs) and, when it loads weight files, their digest (left out
+    otherwise, so the fingerprints of such policies are those made before digests)."""
     conf = cfg.to_json()
     if isinstance(conf.get("mpc"), dict):
-        conf["mpc"] = {k: v for k, v in conf["mpc"].items() if k not in LATER_MPC_FIELDS or v != LATER_MPC_FIELDS[k]}
+        kept = {k: v for k, v in conf["mpc"].items() if k not in LATER_MPC_FIELDS or v != LATER_MPC_FIELDS[k]}
+        conf["mpc"] = {**REMOVED_MPC_FIELDS, **kept}
     digest = artifact_digest(cfg)
     return [conf] if digest is None else [conf, digest]
 

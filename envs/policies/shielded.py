@@ -39,9 +39,6 @@ class ShieldedPolicy:
     def __init__(self, inner: Any, config: MPCConfig) -> None:
         if config.shield_horizon_s <= 0:
             raise ValueError("the shield needs MPCConfig.shield_horizon_s > 0 (0 turns it off)")
-        if config.shield_group_weight:  # the wrapped policy predicts no groups; ignoring the option would be silent
-            raise ValueError("shield_group_weight needs predicted groups: it applies to the MPC policies, not to "
-                             f"{inner.name}{SHIELD_SUFFIX}")
         self.inner, self.config = inner, config
         # the constant-velocity future needs the window's last two rows; more if the wrapped policy reads more
         reads = getattr(inner, "reads_history", True)
@@ -49,11 +46,9 @@ class ShieldedPolicy:
         self.reads_track = getattr(inner, "reads_track", False)
         self.name = f"{inner.name}{SHIELD_SUFFIX}"
         self.stats = PlanStats()
-        self._previous: np.ndarray | None = None
 
     def reset(self, seed: int | None = None) -> None:
         self.inner.reset(seed)
-        self._previous = None
 
     def act(self, view: PolicyView) -> Decision:
         start = time.perf_counter()
@@ -61,8 +56,7 @@ class ShieldedPolicy:
         command = decision.control if decision.control is not None else action_command(*decision.action, view.robot)
         futures, radii = self._futures(view)
         verdict = shield_futures(view.robot_state, np.asarray(command, float)[None], futures, radii, view.walls,
-                                 self.config, self._previous, certain_last=True)
-        self._previous = verdict.control.copy() if verdict.replaced else None
+                                 self.config, certain_last=True)
         self.stats.counts["calls"] += 1
         self.stats.counts["shielded"] += int(verdict.replaced)
         self.stats.solve_times_s.append(time.perf_counter() - start)

@@ -148,10 +148,12 @@ def test_records_made_with_other_weights_under_the_same_name_are_refused(tmp_pat
         plan_benchmark(suite, [cell], [pcfg], tmp_path, recorded=[old])
     # policies that load no weights keep the fingerprint they had before digests existed
     from envs.evaluation.episode import fingerprint
+    from envs.policies.identity import LATER_MPC_FIELDS, REMOVED_MPC_FIELDS
     plain = PolicyConfig("random")
     before = plain.to_json()
-    for later in ("spacetime", "n_starts"):  # added to MPCConfig later, left out at their defaults (LATER_MPC_FIELDS)
+    for later in LATER_MPC_FIELDS:  # added to MPCConfig later, left out at their defaults
         before["mpc"].pop(later)
+    before["mpc"].update(REMOVED_MPC_FIELDS)  # removed from MPCConfig later, put back at their defaults
     assert episode_fingerprint(suite, cell, plain) == fingerprint(suite.name, suite.version, cell.spec,
                                                                   cell.defaults, before)
 
@@ -170,6 +172,34 @@ def test_a_record_made_before_the_latest_planner_fields_still_resumes():
     cell = next(c for c in suite.cells if c.name == "plaza-low-invisible")
     pcfg = PolicyConfig("mpc-oracle", mpc=_replace(suite.mpc_config(ENV_MPC), time_budget_s=10.0))
     assert episode_fingerprint(suite, cell, pcfg) == "a6cc028e0ee80bc8"
+
+
+def test_removing_the_layers_not_adopted_kept_every_fingerprint():
+    """The fingerprints of these configs, computed at b01ea5a, before the layers tried and not adopted left MPCConfig
+    (docs/decisions/planner-settings.md, "Removed layers"): REMOVED_MPC_FIELDS puts their default values back, so
+    every record made while they existed still resumes and merges."""
+    from dataclasses import fields
+    from dataclasses import replace as _replace
+
+    from envs.evaluation.benchmark import episode_fingerprint
+    from envs.evaluation.suite import load_suite
+    from envs.policies.identity import REMOVED_MPC_FIELDS
+    from envs.policies.registry import ENV_MPC
+    from planner import GuidanceConfig, MPCConfig
+
+    assert not set(REMOVED_MPC_FIELDS) & {f.name for f in fields(MPCConfig)}
+    suite = load_suite("crowdnav-v1")
+    cell = next(c for c in suite.cells if c.name == "plaza-low-invisible")
+    pinned = [
+        (PolicyConfig("mpc-cv"), "85ab016336c7b17e"),
+        (PolicyConfig("mpc-gpgraph"), "fbd7eb8330090683"),
+        (PolicyConfig("random"), "02c2adb228459bf0"),
+        (PolicyConfig("random+shield"), "575bc8487bd92fb3"),
+        (PolicyConfig("mpc-oracle", mpc=suite.mpc_config(ENV_MPC)), "9cbb75a6e76294d3"),
+        (PolicyConfig("mpc-cv", mpc=_replace(ENV_MPC, guidance=GuidanceConfig(), n_starts=2)), "a808e0e3e8f70e7a"),
+    ]
+    for pcfg, expected in pinned:
+        assert episode_fingerprint(suite, cell, pcfg) == expected, pcfg.name
 
 
 def test_record_store_skips_a_partial_line_and_appends_after_it(tmp_path):
@@ -338,15 +368,16 @@ def test_an_episode_recorded_as_an_error_is_retried_on_resume_and_the_exit_says_
 
 
 def test_an_mpc_field_added_later_stays_out_of_the_fingerprint_at_its_default():
-    """Records made before `MPCConfig.spacetime` existed still resume: at its default the field is not fingerprinted;
-    set, it is."""
+    """Records made before `MPCConfig.guidance` existed still resume: at its default the field is not fingerprinted;
+    set, it is. A field removed later (`lane`, which predates the v7 records) is fingerprinted at its old default;
+    `spacetime`, added and removed since, is in none."""
     from envs.policies.identity import policy_identity
-    from planner import SpaceTimeConfig
+    from planner import GuidanceConfig
 
     plain = policy_identity(PolicyConfig("mpc-cv"))[0]["mpc"]
-    assert "spacetime" not in plain and "lane" in plain  # lane predates the v7 records: it stays
-    searched = policy_identity(PolicyConfig("mpc-cv", mpc=replace(ENV_MPC, spacetime=SpaceTimeConfig())))[0]["mpc"]
-    assert searched["spacetime"] is not None
+    assert "guidance" not in plain and "spacetime" not in plain and plain["lane"] is None
+    guided = policy_identity(PolicyConfig("mpc-cv", mpc=replace(ENV_MPC, guidance=GuidanceConfig())))[0]["mpc"]
+    assert guided["guidance"] is not None
 
 
 def test_smoke_routes_fit_in_its_episodes():

@@ -257,7 +257,7 @@ def test_policy_flags_reach_the_results_json(tmp_path):
 def test_optional_mpc_fields_take_none_and_the_route_takes_none_or_default():
     from envs.cli import build_parser
     from envs.cli_options import policy_configs
-    from planner import LaneConfig, RouteConfig
+    from planner import RouteConfig
 
     args = build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "wall_margin_m=none",
                                       "--mpc", "route=none"])
@@ -268,10 +268,10 @@ def test_optional_mpc_fields_take_none_and_the_route_takes_none_or_default():
                                       "--mpc", "route=default"])
     (cv,) = policy_configs(args)
     assert cv.mpc.wall_margin_m == 0.1 and cv.mpc.route == RouteConfig()
-    (cv,) = policy_configs(build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "lane=default"]))
-    assert cv.mpc.lane == LaneConfig()
-    with pytest.raises(ValueError, match="lane is one of none, default"):
-        policy_configs(build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "lane=left"]))
+    with pytest.raises(ValueError, match="route is one of none, default"):
+        policy_configs(build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "route=left"]))
+    with pytest.raises(ValueError, match="did you mean"):  # removed 2026-11-28 (docs/decisions/planner-settings.md)
+        policy_configs(build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "lane=default"]))
 
 
 def test_every_registry_policy_states_the_flags_it_reads():

@@ -158,3 +158,17 @@ def test_a_fine_env_step_is_strided_and_the_witness_still_holds_in_the_env() -> 
         _, _, terminated, truncated, info = env.step_control((r.path[k] - env.robot_state[:2]) / cfg.dt_s)
         done = terminated or truncated
     assert info["episode_metrics"]["success"] and not info["episode_metrics"]["collision"]
+
+
+def test_trace_back_walks_one_path_back_through_the_sets() -> None:
+    """`trace_back` (moved here from planner/spacetime.py on 2026-11-28): from a cell of the last set, the nearest
+    cell of each set before it within `pad` cells, in forward order."""
+    from envs.evaluation.reachability import trace_back
+
+    sets = [np.zeros((5, 5), bool) for _ in range(3)]
+    sets[0][0, 0] = True
+    sets[1][1, 0] = sets[1][1, 2] = True
+    sets[2][2, 2] = sets[2][2, 0] = True
+    assert trace_back(sets, (2, 2), 2) == [(0, 0), (1, 2), (2, 2)]
+    assert trace_back(sets, (2, 0), 2) == [(0, 0), (1, 0), (2, 0)]  # the nearest cell of each set
+    assert trace_back(sets[:1], (0, 0), 1) == [(0, 0)]

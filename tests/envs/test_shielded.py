@@ -115,8 +115,6 @@ def test_make_policy_wraps_and_refuses_a_shield_turned_off():
 
     with pytest.raises(ValueError, match="shield_horizon_s"):
         make_policy(PolicyConfig("random+shield", mpc=replace(CROWD_MPC, shield_horizon_s=0.0)), env)
-    with pytest.raises(ValueError, match="shield_group_weight needs predicted groups"):  # not silently ignored
-        make_policy(PolicyConfig("random+shield", mpc=replace(CROWD_MPC, shield_group_weight=1.0)), env)
 
 
 class Probe:

@@ -45,7 +45,7 @@ def _straight(y_end: float, h: int = 10) -> np.ndarray:
 def test_paths_passing_a_person_on_opposite_sides_get_opposite_signs_and_a_far_path_none():
     cfg = make_config(guidance=GuidanceConfig())
     pred = _oncoming()
-    scene = build_scene(np.zeros(5), pred, None, cfg, GOAL)
+    scene = build_scene(np.zeros(5), pred, None, cfg)
     paths = np.concatenate([_straight(1.5), _straight(-1.5), _straight(1.5) + np.array([0.0, 30.0, 0.0, 0.0, 0.0])])
     gaps = ped_gaps(checked_points(paths, 1), scene)
     now = np.full((cfg.max_peds, 2), 1e3)
@@ -80,7 +80,7 @@ def test_a_guided_problem_with_its_switches_off_is_the_free_problem():
     free, guided = build_ocp(free_cfg), build_ocp(replace(free_cfg, guidance=GuidanceConfig()))
     assert "ped_normal" not in param_slices(free.sizes) and "ped_side" in param_slices(guided.sizes)
     state = np.array([0.0, 0.0, 0.1, 0.5, 0.0])
-    scene = build_scene(state, _oncoming(3, 0.2), None, free_cfg, GOAL)
+    scene = build_scene(state, _oncoming(3, 0.2), None, free_cfg)
     p_free, p_guided = (pack_params(o.sizes, state, GOAL, scene) for o in (free, guided))
     rng = np.random.default_rng(0)
     for _ in range(5):
@@ -94,7 +94,7 @@ def test_a_half_plane_holds_the_side_a_disc_does_not():
     cfg = make_config(max_peds=1, max_walls=0, max_groups=0, guidance=GuidanceConfig())
     ocp = build_ocp(cfg)
     state = np.zeros(5)
-    scene = build_scene(state, _oncoming(), None, cfg, GOAL)
+    scene = build_scene(state, _oncoming(), None, cfg)
     p = pack_params(ocp.sizes, state, GOAL, scene)
     sl = param_slices(ocp.sizes)
     normal = np.zeros((ocp.sizes.nt, 1, ocp.sizes.k, 2))

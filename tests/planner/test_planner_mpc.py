@@ -266,7 +266,7 @@ def test_initial_guess_is_the_cheapest_candidate_under_the_nlp_cost(goal):
     state = np.array([0.0, 0.0, 0.3, 0.6, 0.1])
     for _ in range(2):  # the second time with the first plan's shifted copy as one more candidate
         ocp, layout = planner.ocp, planner.ocp.layout
-        p = pack_params(ocp.sizes, state, goal, build_scene(state, pred, None, planner.config, goal))
+        p = pack_params(ocp.sizes, state, goal, build_scene(state, pred, None, planner.config))
         offsets = np.array(mpc_module.HEADING_OFFSETS_RAD)
         speeds = np.full(offsets.size, planner.config.robot.max_speed_mps)
         states, controls = goal_rollouts(state, goal, offsets, speeds, planner.config)
@@ -303,7 +303,7 @@ def test_more_starts_never_keep_a_costlier_plan(goal):
     from planner.ocp import pack_params
     from planner.scene import build_scene
 
-    p = pack_params(one.ocp.sizes, state, goal, build_scene(state, pred, None, one.config, goal))
+    p = pack_params(one.ocp.sizes, state, goal, build_scene(state, pred, None, one.config))
 
     def objective(planner, result):
         layout = planner.ocp.layout

@@ -140,27 +140,6 @@ def test_the_reach_filter_never_changes_the_verdict(monkeypatch):
         assert (filtered.risk, filtered.chosen_risk, filtered.replaced) == (full.risk, full.chosen_risk, full.replaced)
 
 
-def test_commitment_keeps_the_side_of_an_evasive_manoeuvre():
-    """A pedestrian walks head-on at the robot: dodging left and right are mirror images. With commitment the
-    shield keeps the side it chose at the previous step; without it the previous command is ignored."""
-    state = np.array([0.0, 0.0, 0.0, 1.2, 0.0])
-    pred = _crossing([2.6, 0.0], [-1.3, 0.0])
-    yaw = SHIELD.robot.max_yaw_rate_radps
-    hold = replace(SHIELD, shield_hold_weight=0.1)
-    free = shield_control(state, STRAIGHT, pred, None, SHIELD)
-    assert free.replaced and free.control[1] != 0.0
-    for side in (-1.0, 1.0):
-        previous = np.array([1.2, side * yaw])
-        kept = shield_control(state, STRAIGHT, pred, None, hold, previous)
-        assert kept.replaced and np.sign(kept.control[1]) == side
-        assert np.allclose(shield_control(state, STRAIGHT, pred, None, SHIELD, previous).control, free.control)
-
-
-def test_invalid_hold_weight_raises():
-    with pytest.raises(ValueError):
-        MPCConfig(shield_hold_weight=-0.1)
-
-
 def test_the_shield_never_steers_into_a_wall_while_another_command_stays_clear(monkeypatch):
     """A pedestrian comes at the robot from ahead-left; turning right, away from them, leads into a wall 0.15 m off
     the robot's right side. The wall is certain, the pedestrian a prediction: the shield keeps the robot off the wall.
@@ -257,44 +236,3 @@ def test_the_grid_roll_out_is_the_stepwise_roll_out_bit_for_bit(robot):
         varying = held + rng.normal(0.0, 0.5, held.shape) * (i % 2)
         stepped = np.stack([np.stack([s[:2] for s in _stepped(state, c, robot)]) for c in varying])
         assert rollout_candidates(state, varying, 0.1, robot).tobytes() == stepped.tobytes()
-
-
-def _walker_and_pair(group_ids) -> PedPrediction:
-    """A walker coming head-on at 1.2 m/s and two people standing 0.9 m apart ahead-left, with group_ids (3,)."""
-    starts = np.array([[3.0, 0.45], [1.4, 0.3], [1.4, 1.2]])
-    vels = np.array([[-1.2, 0.0], [0.0, 0.0], [0.0, 0.0]])
-    t = 0.4 * np.arange(1, 13)
-    pos = starts[None, None] + t[None, :, None, None] * vels[None, None]
-    return PedPrediction(pos, np.full(3, 0.3), np.asarray(group_ids), np.ones(3, bool), current=starts, step_s=STEP_S)
-
-
-def _group_shortfall(state, command, pair: np.ndarray, cfg: MPCConfig) -> float:
-    """Smallest surface clearance (m) of the robot holding `command` for 1.6 s from the segment between the two
-    standing people at pair (2, 2), less their 0.3 m radius: the group's region as the env measures intrusion."""
-    xy = rollout_candidates(state, np.tile(command, (1, 16, 1)), 0.1, cfg.robot)[0]
-    a, ab = pair[0], pair[1] - pair[0]
-    t = np.clip(((xy - a) @ ab) / (ab @ ab), 0.0, 1.0)
-    return float((np.linalg.norm(xy - (a + t[:, None] * ab), axis=1) - 0.3 - cfg.robot.radius_m).min())
-
-
-def test_the_group_weight_passes_round_a_group_as_safely():
-    """Dodging the walker, the shield alone grazes the standing pair's region; told they are a group
-    (`shield_group_weight`), it picks a command as safe (no sample hit) that keeps the group margin."""
-    state, pair = np.array([0.0, 0.0, 0.0, 1.2, 0.0]), np.array([[1.4, 0.3], [1.4, 1.2]])
-    grouped = replace(SHIELD, shield_group_weight=1.0)
-    plain = shield_control(state, STRAIGHT, _walker_and_pair([0, 1, 1]), None, SHIELD)
-    aware = shield_control(state, STRAIGHT, _walker_and_pair([0, 1, 1]), None, grouped)
-    assert plain.replaced and aware.replaced and aware.chosen_risk == plain.chosen_risk == 0.0
-    assert _group_shortfall(state, plain.control, pair, SHIELD) < SHIELD.shield_group_margin_m
-    assert _group_shortfall(state, aware.control, pair, SHIELD) >= SHIELD.shield_group_margin_m
-    # strangers (singletons) are no group: the weight then changes nothing
-    strangers = shield_control(state, STRAIGHT, _walker_and_pair([0, 1, 2]), None, grouped)
-    assert np.array_equal(strangers.control, plain.control)
-
-
-def test_invalid_group_weight_raises():
-    for bad in (-0.5, float("nan"), float("inf")):
-        with pytest.raises(ValueError, match="shield_group_weight"):
-            MPCConfig(shield_group_weight=bad)
-    with pytest.raises(ValueError, match="shield_group_margin_m"):
-        MPCConfig(shield_group_margin_m=-0.1)
