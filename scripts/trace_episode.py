@@ -2,9 +2,10 @@
 
 Per re-plan: time, robot pose and speed, the solve's status and fallback, whether the safety shield replaced the
 plan's control (and the risk it saw), the plan's largest clearance violation (slack, m), the applied control, the
-plan's end point, the subgoal (the goal or the route's carrot), how many passing options were solved (guidance), and the three nearest pedestrians (centre distance,
-position, velocity). Then the outcome. This is how the failures in docs/decisions/planner-settings.md were found
-(e.g. plans that ended behind a corridor wall). For tuning suites and cells; it reads nothing a policy may not.
+plan's end point, the subgoal (the goal or the route's carrot), how many passing options were solved (guidance), and
+the three nearest pedestrians (centre distance, position, velocity). Then the outcome. This is how the failures in
+docs/decisions/planner-settings.md were found (e.g. plans that ended behind a corridor wall). For tuning suites and
+cells; it reads nothing a policy may not.
 
     .venv/bin/python scripts/trace_episode.py crowdnav-tune tune-corridor-low-visible 1009 --policy mpc-oracle \
         --from 2 --to 10
@@ -37,7 +38,8 @@ def _line(t: float, robot: np.ndarray, result: Any, peds: Any) -> str:
     return (f"t={t:5.1f} robot=({robot[0]:5.2f},{robot[1]:5.2f}) v={speed:4.2f} {result.status:13s} "
             f"fallback={result.fallback or '-':13s} shield={'yes' if result.shielded else 'no ':3s} "
             f"risk={result.shield_risk:.2f} slack={result.max_slack_m:5.2f} u={np.round(result.control, 2)} "
-            f"end=({result.states[-1, 0]:.1f},{result.states[-1, 1]:.1f}) sub={sub} opts={len(result.options)} | {near}")
+            f"end=({result.states[-1, 0]:.1f},{result.states[-1, 1]:.1f}) sub={sub} opts={len(result.options)} "
+            f"| {near}")
 
 
 def trace(suite: str, cell_name: str, seed: int, policy: str, t_from: float, t_to: float,
