@@ -135,6 +135,11 @@ def is_scenario_file(name: str) -> bool:
     return str(name).endswith(".toml")
 
 
+def scenario_label(name: str) -> str:
+    """A scenario's name for file names and progress bars: a built-in's name, or a scenario file's stem."""
+    return Path(name).stem if is_scenario_file(name) else name
+
+
 def _builtins() -> dict[str, ScenarioFile]:
     files = {p.stem: read_scenario_file(p) for p in sorted(BUILTIN_DIR.glob("*.toml"))}
     order = [n for n in BUILTIN_ORDER if n in files] + sorted(set(files) - set(BUILTIN_ORDER))

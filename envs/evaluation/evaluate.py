@@ -18,6 +18,7 @@ from contextlib import closing
 from pathlib import Path
 from typing import Any
 
+from crowdsim.scenarios import is_scenario_file, scenario_digest
 from envs.atomic import check_writable_dir, write_json_atomic, write_text_atomic
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.drawing.video import DEFAULT_SIZE_PX, check_video_options, video_name
@@ -70,8 +71,10 @@ class CtrlC:
 def config_summary(config: CrowdNavConfig) -> dict[str, Any]:
     """The settings a published number needs next to it (crowd size, visibility, kinematics, time limit, dt)."""
     replay = config.scenario == REPLAY_SCENARIO
+    from_file = {"scenario_sha256": scenario_digest(config.scenario)} if is_scenario_file(config.scenario) else {}
     return {
         "scenario": config.scenario,
+        **from_file,  # a scenario file's bytes: a changed file is not resumed into the records of the old one
         "n_pedestrians": None if replay else config.n_pedestrians,
         "robot_visible": None if replay else config.robot_visible,
         "scenario_options": [list(o) for o in config.scenario_options],
