@@ -185,7 +185,8 @@ def scenario_digest(name: str) -> str | None:
 
 def check_options(name: str, options: Mapping[str, float]) -> None:
     """Raise ValueError for an unknown scenario, an option it does not read (listing the valid ones) or a value
-    out of range (lengths > 0, density >= 0, flags 0 or 1, everything finite)."""
+    out of range (lengths > 0, density >= 0, flags 0 or 1, everything finite). A scenario file is also built under
+    the options (ScenarioFileError: a bad value, an area lying across a wall)."""
     file = scenario_file(name)
     valid = file.options
     for key, value in options.items():
@@ -201,6 +202,8 @@ def check_options(name: str, options: Mapping[str, float]) -> None:
             raise ValueError(f"scenario option density must be >= 0 people/m^2, got {value!r}")
         if key in file.flags and value not in (0.0, 1.0):
             raise ValueError(f"scenario option {key} is a flag: 0 or 1, got {value!r}")
+    if is_scenario_file(name):
+        _build(file, dict(options))
 
 
 def make_scenario(name: str, options: Mapping[str, float] | None = None) -> Scenario:
@@ -209,10 +212,13 @@ def make_scenario(name: str, options: Mapping[str, float] | None = None) -> Scen
     ones; a bad file, or an area lying across a wall, a ScenarioFileError naming the file."""
     opt = dict(options or {})
     check_options(name, opt)
-    file = scenario_file(name)
-    fields = file.fields(opt)
+    return _build(scenario_file(name), opt)
+
+
+def _build(file: ScenarioFile, options: dict[str, float]) -> Scenario:
+    fields = file.fields(options)
     fields["flows"] = tuple(Flow(spawn, target) for spawn, target in fields["flows"])
     try:
-        return Scenario(**fields, options=opt)
+        return Scenario(**fields, options=options)
     except ValueError as exc:
         raise ScenarioFileError(f"{file.source}: {exc}") from None
