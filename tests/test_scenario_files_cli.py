@@ -94,3 +94,28 @@ def test_scenarios_lists_the_builtin_files(capsys):
     out = capsys.readouterr().out
     for name, file in SCENARIOS.items():
         assert f"{name}  {file.source}\n    {file.description}" in out and Path(file.source).is_file()
+
+
+def test_a_suite_cell_runs_a_scenario_file_and_its_bytes_enter_the_fingerprint(room):
+    from envs.evaluation.benchmark import episode_fingerprint
+    from envs.evaluation.suite import SUITES_DIR, load_suite, parse_suite
+    from envs.policies import PolicyConfig
+
+    def suite(path: str):
+        return parse_suite({"name": "mine", "version": 1, "cells": [
+            {"name": "room", "scenario": path, "n_pedestrians": 6, "robot_visible": True, "episodes": 2, "seed0": 0,
+             "options": {"width_m": 11.0}}]})
+
+    cell = suite(str(room)).cells[0]
+    config = cell.env_config(0)
+    assert config.scenario == str(room) and config.scenario_options == (("width_m", 11.0),)
+    policy = PolicyConfig("social-force")
+    before = episode_fingerprint(suite(str(room)), cell, policy)
+    room.write_text(room.read_text().replace("width_m = 10.0", "width_m = 10.5"))
+    assert episode_fingerprint(suite(str(room)), suite(str(room)).cells[0], policy) != before
+    with pytest.raises(ValueError) as info:  # a relative path starts in the suites' folder
+        suite("rooms/nowhere.toml")
+    assert str(info.value).startswith(f"{SUITES_DIR / 'rooms/nowhere.toml'}: cannot read the scenario file")
+    smoke = load_suite("smoke")
+    for c in smoke.cells:  # built-in cells keep the fingerprints their records hold
+        assert c.fingerprint_spec is c.spec
