@@ -66,7 +66,7 @@ BAD = [
 
 
 @pytest.mark.parametrize("old, new, message", BAD)
-@pytest.mark.parametrize("command", ["crowdsim", "crowdnav"])
+@pytest.mark.parametrize("command", ["crowdsim", "crowdnav", "train"])
 def test_a_bad_file_is_one_line_exit_2_nothing_written(room, tmp_path, capsys, old, new, message, command):
     text = room.read_text()
     assert text.count(old) >= 1
@@ -74,9 +74,11 @@ def test_a_bad_file_is_one_line_exit_2_nothing_written(room, tmp_path, capsys, o
     out = tmp_path / "out"
     if command == "crowdsim":
         code, err = run_cli(crowdsim_main, ["generate", "--scenario", str(room), "--out", str(out)], capsys)
-    else:
+    elif command == "crowdnav":
         code, err = run_cli(crowdnav_main, ["evaluate", "--policy", "social-force", "--scenario", str(room),
                                             "--episodes", "1", "--out", str(out)], capsys)
+    else:
+        code, err = run_cli(crowdnav_main, ["train", "--scenario", str(room), "--out", str(out)], capsys)
     assert code == 2 and not out.exists()
     assert err.count("\n") == 1 and message in err and "Traceback" not in err, err
 
@@ -119,3 +121,18 @@ def test_a_suite_cell_runs_a_scenario_file_and_its_bytes_enter_the_fingerprint(r
     smoke = load_suite("smoke")
     for c in smoke.cells:  # built-in cells keep the fingerprints their records hold
         assert c.fingerprint_spec is c.spec
+
+
+def test_the_robot_table_places_the_robot(room):
+    import numpy as np
+
+    from crowdsim import SimConfig
+    from envs.crowds.crowd import SimCrowd
+
+    crowd = SimCrowd(SimConfig(scenario=str(room), n_pedestrians=6))
+    rng = np.random.default_rng(0)
+    starts = np.array([crowd.robot_route(rng)[0] for _ in range(40)])
+    west = (starts[:, 0] >= 1.0) & (starts[:, 0] <= 2.0)
+    east = (starts[:, 0] >= 8.0) & (starts[:, 0] <= 9.0)
+    assert (west | east).all() and west.any() and east.any()  # both_ways: from either end
+    assert ((starts[:, 1] >= 1.0) & (starts[:, 1] <= 2.5)).all()
