@@ -18,7 +18,7 @@ from contextlib import closing
 from pathlib import Path
 from typing import Any
 
-from crowdsim.scenarios import is_scenario_file, scenario_digest
+from crowdsim.scenarios import is_scenario_file, scenario_digest, scenario_label
 from envs.atomic import check_writable_dir, write_json_atomic, write_text_atomic
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.drawing.video import DEFAULT_SIZE_PX, check_video_options, video_name
@@ -150,11 +150,12 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(seed, seed + episodes))
+    where = scenario_label(config.scenario)  # a scenario file: its stem, in video names
     fp = fingerprint(config_summary(config), *policy_identity(pcfg))  # with the weights' digest
     tasks = [EpisodeTask(config, pcfg, s, fingerprint=fp, keep_scene=out is not None and i < draw,
                          rrd_path=str(out / f"{stem}_seed{s}.rrd") if out is not None and i < record else None,
                          error_dir=str(out / "errors") if out is not None else None,
-                         video=VideoSpec(str(out / "videos" / video_name(stem, config.scenario, s, video_format)),
+                         video=VideoSpec(str(out / "videos" / video_name(stem, where, s, video_format)),
                                          video_format, video_size) if out is not None and i < video else None)
              for i, s in enumerate(seeds)]
     start = time.perf_counter()
