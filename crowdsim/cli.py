@@ -22,9 +22,9 @@ from crowdsim.generate import (
     generate,
     make_dataset,
 )
-from crowdsim.names import long_options, parser_hint, unknown_name
+from crowdsim.names import long_options, parser_hint
 from crowdsim.presets import PRESETS, get_preset, sample_config
-from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS
+from crowdsim.scenarios import SCENARIO_OPTIONS, SCENARIOS, scenario_file
 
 
 def console_script(name: str) -> str:
@@ -53,8 +53,7 @@ def _options(pairs: list[str]) -> tuple[tuple[str, float], ...]:
 
 def _config(args: argparse.Namespace, scenario: str) -> SimConfig:
     """The SimConfig of the flags (ValueError naming the bad flag: unknown scenario or option, bad values)."""
-    if scenario not in SCENARIOS:
-        raise ValueError(unknown_name("scenario", scenario, sorted(SCENARIOS)))
+    scenario_file(scenario)  # ValueError: an unknown name, or a bad scenario file (one line naming file and key)
     if args.pedestrians < 1:
         raise ValueError(f"--pedestrians must be >= 1, got {args.pedestrians}")
     if args.seed < 0:
@@ -147,13 +146,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="crowdsim", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     g = sub.add_parser("generate", help="simulate one scenario and export ETH/UCY files")
-    g.add_argument("--scenario", default="plaza", help=f"one of: {', '.join(sorted(SCENARIOS))}")
+    g.add_argument("--scenario", default="plaza", metavar="NAME|PATH.toml",
+                   help=f"one of: {', '.join(sorted(SCENARIOS))}; or a scenario file (docs/crowdsim.md)")
     g.add_argument("--out", type=Path, required=True)
     g.add_argument("--rrd", action="store_true", help="also write a rerun recording")
     _common(g, 120.0)
     d = sub.add_parser("dataset", help="several scenarios x seeds into train/val/test folders")
     d.add_argument("--scenarios", default=None,
-                   help=f"comma-separated names (default: the preset's, or {DEFAULT_SCENARIOS})")
+                   help=f"comma-separated names or .toml scenario files (default: the preset's, or "
+                        f"{DEFAULT_SCENARIOS})")
     d.add_argument("--preset", default=None, choices=sorted(PRESETS),
                    help="draw each recording's parameters from this training preset (crowdsim presets lists "
                         "them); it sets --pedestrians, --leave-rate, --merge-rate and --option")
@@ -170,7 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common(d, 300.0)
     m = sub.add_parser("demo", help="generate and record a grouped crowd on built-in defaults")
     m.add_argument("--out", type=Path, default=Path("out/demo-crowd"))
-    sub.add_parser("scenarios", help="list the scenario names")
+    sub.add_parser("scenarios", help="list the built-in scenarios: name, file, description, options")
     sub.add_parser("presets", help="list the training presets of `dataset --preset`")
     for command in sub.choices.values():
         show_defaults(command)
@@ -232,7 +233,8 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "scenarios":
         for name in sorted(SCENARIOS):
             opts = ", ".join(f"{k}={v:g}" for k, v in SCENARIO_OPTIONS[name].items())
-            print(f"{name}  (options: {opts})")
+            print(f"{name}  {SCENARIOS[name].source}\n    {SCENARIOS[name].description}  (options: {opts})")
+        print("any other scenario: --scenario PATH.toml (the format: docs/crowdsim.md, or a file above)")
         return 0
     if args.command == "presets":
         for preset in PRESETS.values():

@@ -23,6 +23,7 @@ from crowdsim.export import (
     write_recording,
 )
 from crowdsim.presets import get_preset, sample_config
+from crowdsim.scenarios import is_scenario_file, scenario_digest, scenario_label
 from crowdsim.sim import CrowdSimulator
 
 SPLITS = ("train", "val", "test")
@@ -74,11 +75,15 @@ def simulate(config: SimConfig, spec: RunSpec, rrd_path: Path | None = None,
 
 def metadata(config: SimConfig, spec: RunSpec, sim: CrowdSimulator,
              preset: str | None = None) -> dict[str, Any]:
-    """The JSON metadata of a recording; `preset` ("name@version") when its config was drawn from a preset."""
+    """The JSON metadata of a recording; `preset` ("name@version") when its config was drawn from a preset. A scenario
+    file's recording also holds the file's sha256 (`scenario_sha256`) and its name (`scenario_name`)."""
+    from_file = {"scenario_name": sim.scenario.name, "scenario_sha256": scenario_digest(config.scenario)} \
+        if is_scenario_file(config.scenario) else {}
     return {
         "generator": f"crowdsim {__version__}",
         "preset": preset,
         "scenario": config.scenario,
+        **from_file,
         "seed": spec.seed,
         "steps": int(round(spec.duration_s / config.record_dt_s)),
         "duration_s": spec.duration_s,
@@ -90,8 +95,8 @@ def metadata(config: SimConfig, spec: RunSpec, sim: CrowdSimulator,
 
 
 def default_name(config: SimConfig, spec: RunSpec) -> str:
-    """File stem of a recording: `<scenario>_n<pedestrians>_s<seed>`."""
-    return f"{config.scenario}_n{config.n_pedestrians}_s{spec.seed}"
+    """File stem of a recording: `<scenario>_n<pedestrians>_s<seed>` (a scenario file: its file name's stem)."""
+    return f"{scenario_label(config.scenario)}_n{config.n_pedestrians}_s{spec.seed}"
 
 
 def generate(config: SimConfig, spec: RunSpec, out_dir: Path, name: str | None = None,

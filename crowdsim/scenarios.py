@@ -1,17 +1,22 @@
 """Scenario registry: geometry (wall segments), where groups come from and where they go.
 
-A scenario is data plus three small methods; `make_scenario(name, options)` builds one from the
-registry and raises an error listing the valid names for an unknown one.
+A scenario is data plus three small methods. Every scenario is a TOML file (`crowdsim.scenario_files` describes the
+format): the built-in ones ship in `crowdsim/builtin_scenarios/<name>.toml`, and any other file is named by its
+path. `make_scenario(name_or_path, options)` builds one and raises an error listing the valid names for an unknown
+one.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from crowdsim.names import did_you_mean, unknown_name
+from crowdsim.scenario_files import ScenarioFile, ScenarioFileError, read_scenario_file
 
 Rect = tuple[float, float, float, float]  # xmin, ymin, xmax, ymax in metres
 
@@ -48,6 +53,9 @@ class Scenario:
     stop_areas: tuple[Rect, ...] = ()  # where a group may stop and stand (BehaviourConfig stops)
     pois: tuple[tuple[float, float], ...] = ()  # points of interest (x, y) m that people stop at
     options: Mapping[str, float] = field(default_factory=dict)
+    robot_start: Rect | None = None  # where the robot starts (envs); None: the env's route for the scenario
+    robot_goal: Rect | None = None  # where its goal is drawn (with robot_start)
+    robot_both_ways: bool = False  # whether start and goal swap at random (half of the episodes)
 
     def __post_init__(self) -> None:
         if self.on_arrival not in ("remove", "stop", "new_goal"):
@@ -61,6 +69,11 @@ class Scenario:
                 _check_rect(self.name, f"flow {k} {what}", rect, walls)
         for k, rect in enumerate(self.stop_areas):
             _check_rect(self.name, f"stop area {k}", rect, walls)
+        if (self.robot_start is None) != (self.robot_goal is None):
+            raise ValueError(f"scenario {self.name}: robot_start and robot_goal go together")
+        for what, rect in (("robot start", self.robot_start), ("robot goal", self.robot_goal)):
+            if rect is not None:
+                _check_rect(self.name, what, rect, walls)
 
     def draw_flow(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """A group's origin (2,) and destination (2,), metres."""
@@ -113,141 +126,69 @@ def _check_rect(name: str, what: str, rect: Rect, walls: np.ndarray) -> None:
             raise ValueError(f"scenario {name}: {what} area {rect} lies across the wall {a.tolist()}-{b.tolist()}")
 
 
-def corridor(opt: Mapping[str, float]) -> Scenario:
-    """Bidirectional corridor, length x width (default 20 x 4 m). `periodic=1` makes it a one-way ring
-    (every pedestrian walks +x and wraps at the end), used to hold a fixed density."""
-    length, width = opt.get("length_m", 20.0), opt.get("width_m", 4.0)
-    walls = [[[-2.0, 0.0], [length + 2.0, 0.0]], [[-2.0, width], [length + 2.0, width]]]
-    m = 0.4
-    right = Flow((0.0, m, 1.5, width - m), (length + 1.0, m, length + 1.5, width - m))
-    left = Flow((length - 1.5, m, length, width - m), (-1.5, m, -1.0, width - m))
-    if opt.get("periodic", 0.0):
-        dense = (0.3, 0.3, length - 0.3, width - 0.3) if opt.get("density", 0.0) > 0 else None
-        return Scenario("corridor", np.array(walls), (-2.0, 0.0, length + 2.0, width),
-                        (Flow((0.0, m, length, width - m), (length + 1.0, m, length + 1.5, width - m)),),
-                        continuous=False, periodic_x=(0.0, length), dense_spawn=dense, options=dict(opt))
-    # people stop along the walls (not in the entrance zones), leaving the middle of a 4 m corridor free
-    bands = ((3.0, 0.85, length - 3.0, 1.0), (3.0, width - 1.0, length - 3.0, width - 0.85)) if width >= 3.5 else ()
-    return Scenario("corridor", np.array(walls), (-2.0, 0.0, length + 2.0, width), (right, left),
-                    stop_areas=bands, options=dict(opt))
+BUILTIN_DIR = Path(__file__).resolve().parent / "builtin_scenarios"  # package data: <name>.toml each
+BUILTIN_ORDER = ("corridor", "crossing", "bottleneck", "plaza", "circle_crossing", "open")
 
 
-def crossing(opt: Mapping[str, float]) -> Scenario:
-    """Two perpendicular flows (west->east and south->north) through a cross of two 6 m wide streets."""
-    half, w = opt.get("half_length_m", 10.0), opt.get("width_m", 6.0) / 2.0
-    walls = []
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            corner = [sx * w, sy * w]
-            walls.append([[sx * half, sy * w], corner])
-            walls.append([corner, [sx * w, sy * half]])
-    m = 0.4
-    east = Flow((-half, -w + m, -half + 2.0, w - m), (half + 1.0, -w + m, half + 1.5, w - m))
-    north = Flow((-w + m, -half, w - m, -half + 2.0), (-w + m, half + 1.0, w - m, half + 1.5))
-    # people stop on the pavements of the four arms, beside the walls, away from the entrances
-    near, far = w + 1.0, half - 3.0
-    bands = tuple(rect for rect in (
-        (near, w - 1.0, far, w - 0.85), (-far, -w + 0.85, -near, -w + 1.0),
-        (w - 1.0, -far, w - 0.85, -near), (-w + 0.85, near, -w + 1.0, far)) if rect[0] < rect[2] and rect[1] < rect[3])
-    return Scenario("crossing", np.array(walls), (-half, -half, half, half), (east, north), stop_areas=bands,
-                    options=dict(opt))
+def is_scenario_file(name: str) -> bool:
+    """Whether a scenario name is the path of a scenario file (it ends in .toml) rather than a built-in's name."""
+    return str(name).endswith(".toml")
 
 
-def bottleneck(opt: Mapping[str, float]) -> Scenario:
-    """A room (default 8 x 8 m) emptying through a door (default 1.0 m wide) into a short corridor.
-
-    `density` > 0 fills the back of the room on a lattice at that many persons per m^2 at start.
-    """
-    size, door = opt.get("room_m", 8.0), opt.get("door_m", 1.0)
-    y0, y1 = size / 2.0 - door / 2.0, size / 2.0 + door / 2.0
-    walls = [
-        [[0.0, 0.0], [size, 0.0]], [[0.0, size], [size, size]], [[0.0, 0.0], [0.0, size]],
-        [[size, 0.0], [size, y0]], [[size, y1], [size, size]],
-        [[size, y0], [size + 2.0, y0]], [[size, y1], [size + 2.0, y1]],
-    ]
-    m = 0.4
-    flow = Flow((m, m, size / 2.0, size - m), (size + 3.0, y0 + 0.2, size + 3.5, y1 - 0.2))
-    dense = (m, m, size - m, size - m) if opt.get("density", 0.0) > 0 else None
-    return Scenario("bottleneck", np.array(walls), (0.0, 0.0, size + 4.0, size), (flow,),
-                    continuous=bool(opt.get("continuous", 1.0)), dense_spawn=dense, options=dict(opt))
+def scenario_label(name: str) -> str:
+    """A scenario's name for file names and progress bars: a built-in's name, or a scenario file's stem."""
+    return Path(name).stem if is_scenario_file(name) else name
 
 
-def plaza(opt: Mapping[str, float]) -> Scenario:
-    """Open square plaza (default 20 x 20 m) with an entrance in the middle of each side; groups walk
-    between random entrances, continuously replaced as they leave, so a recording can run for hours."""
-    s, gate = opt.get("size_m", 20.0), opt.get("gate_m", 4.0)
-    g0, g1 = s / 2.0 - gate / 2.0, s / 2.0 + gate / 2.0
-    walls = []
-    for a, b in (([0, 0], [s, 0]), ([s, 0], [s, s]), ([s, s], [0, s]), ([0, s], [0, 0])):
-        a, b = np.array(a, float), np.array(b, float)
-        d = (b - a) / s
-        walls += [[a, a + d * g0], [a + d * g1, b]]
-    m = 0.4
-    gates = [
-        ((g0 + m, m, g1 - m, 1.5), (g0 + m, -1.5, g1 - m, -1.0)),  # south
-        ((g0 + m, s - 1.5, g1 - m, s - m), (g0 + m, s + 1.0, g1 - m, s + 1.5)),  # north
-        ((m, g0 + m, 1.5, g1 - m), (-1.5, g0 + m, -1.0, g1 - m)),  # west
-        ((s - 1.5, g0 + m, s - m, g1 - m), (s + 1.0, g0 + m, s + 1.5, g1 - m)),  # east
-    ]
-    flows = tuple(Flow(gates[a][0], gates[b][1]) for a in range(4) for b in range(4) if a != b)
-    # groups stop anywhere but in the entrances' approaches; two points of interest (a kiosk, a notice board)
-    pois = ((0.3 * s, 0.7 * s), (0.7 * s, 0.3 * s))
-    return Scenario("plaza", np.array(walls), (0.0, 0.0, s, s), flows, interior=(1.0, 1.0, s - 1.0, s - 1.0),
-                    stop_areas=((2.5, 2.5, s - 2.5, s - 2.5),) if s > 6.0 else (), pois=pois, options=dict(opt))
+def _builtins() -> dict[str, ScenarioFile]:
+    files = {p.stem: read_scenario_file(p) for p in sorted(BUILTIN_DIR.glob("*.toml"))}
+    order = [n for n in BUILTIN_ORDER if n in files] + sorted(set(files) - set(BUILTIN_ORDER))
+    for name in order:
+        if files[name].name != name:
+            raise ScenarioFileError(f"{files[name].source}: name: expected {name!r} (the file's stem)")
+    return {name: files[name] for name in order}
 
 
-def circle_crossing(opt: Mapping[str, float]) -> Scenario:
-    """CrowdNav-style circle crossing: groups start on a circle (default radius 6 m) and walk to the
-    opposite side; on arrival they draw a new crossing, so the scene never empties."""
-    r = opt.get("radius_m", 6.0)
-    n_arc = 24
-    flows = []
-    for k in range(n_arc):
-        a = 2 * np.pi * k / n_arc
-        p, q = r * np.array([np.cos(a), np.sin(a)]), -r * np.array([np.cos(a), np.sin(a)])
-        flows.append(Flow((p[0] - 0.75, p[1] - 0.75, p[0] + 0.75, p[1] + 0.75),
-                          (q[0] - 0.5, q[1] - 0.5, q[0] + 0.5, q[1] + 0.5)))
-    return Scenario("circle_crossing", np.zeros((0, 2, 2)), (-r - 1, -r - 1, r + 1, r + 1), tuple(flows),
-                    on_arrival="new_goal", continuous=False, exit_radius_m=0.5, options=dict(opt))
+# The built-in scenarios, read from their files (name -> parsed file).
+SCENARIOS: dict[str, ScenarioFile] = _builtins()
+
+# The options each built-in scenario reads (`SimConfig.scenario_options`), with their defaults: the files'
+# [options]. Lengths (`_m`) must be > 0; `density` (people/m², dense initial placement) >= 0; a flag (an option
+# whose default the file gives as true/false) is 0 or 1.
+SCENARIO_OPTIONS: dict[str, dict[str, float]] = {name: dict(f.options) for name, f in SCENARIOS.items()}
 
 
-def open_space(opt: Mapping[str, float]) -> Scenario:
-    """Empty ground with no walls; pedestrians stop at their goals (used for free-walking checks)."""
-    size = opt.get("size_m", 30.0)
-    flow = Flow((0.0, 0.0, 1.0, size), (size - 1.0, 0.0, size, size))
-    return Scenario("open", np.zeros((0, 2, 2)), (0.0, 0.0, size, size), (flow,), on_arrival="stop",
-                    continuous=False, options=dict(opt))
+@functools.lru_cache(maxsize=64)
+def _read_cached(path: str, mtime_ns: int, size: int) -> ScenarioFile:
+    return read_scenario_file(path)
 
 
-SCENARIOS: dict[str, Callable[[Mapping[str, float]], Scenario]] = {
-    "corridor": corridor,
-    "crossing": crossing,
-    "bottleneck": bottleneck,
-    "plaza": plaza,
-    "circle_crossing": circle_crossing,
-    "open": open_space,
-}
+def scenario_file(name: str) -> ScenarioFile:
+    """The parsed file of a scenario: a built-in's by name, or the file at a path ending in .toml (re-read when it
+    changes). ValueError listing the valid names for an unknown name; ScenarioFileError for a bad file."""
+    if is_scenario_file(name):
+        try:
+            stat = Path(name).stat()
+        except OSError as exc:
+            raise ScenarioFileError(f"{name}: cannot read the scenario file: {(exc.strerror or str(exc)).lower()}") \
+                from None
+        return _read_cached(str(name), stat.st_mtime_ns, stat.st_size)
+    if name not in SCENARIOS:
+        raise ValueError(unknown_name("scenario", name, sorted(SCENARIOS)) + "; or the path of a .toml scenario file")
+    return SCENARIOS[name]
 
 
-# The options each scenario reads (`SimConfig.scenario_options`), with their defaults. Lengths (`_m`) must be
-# > 0; `density` (people/m², dense initial placement) >= 0; `periodic` / `continuous` are 0 or 1 flags.
-SCENARIO_OPTIONS: dict[str, dict[str, float]] = {
-    "corridor": {"length_m": 20.0, "width_m": 4.0, "periodic": 0.0, "density": 0.0},
-    "crossing": {"half_length_m": 10.0, "width_m": 6.0},
-    "bottleneck": {"room_m": 8.0, "door_m": 1.0, "density": 0.0, "continuous": 1.0},
-    "plaza": {"size_m": 20.0, "gate_m": 4.0},
-    "circle_crossing": {"radius_m": 6.0},
-    "open": {"size_m": 30.0},
-}
-_FLAGS = ("periodic", "continuous")
+def scenario_digest(name: str) -> str | None:
+    """The sha256 of a scenario file's bytes (what records of it depend on), None for a built-in name."""
+    return scenario_file(name).sha256 if is_scenario_file(name) else None
 
 
 def check_options(name: str, options: Mapping[str, float]) -> None:
     """Raise ValueError for an unknown scenario, an option it does not read (listing the valid ones) or a value
-    out of range (lengths > 0, density >= 0, flags 0 or 1, everything finite)."""
-    if name not in SCENARIOS:
-        raise ValueError(unknown_name("scenario", name, sorted(SCENARIOS)))
-    valid = SCENARIO_OPTIONS[name]
+    out of range (lengths > 0, density >= 0, flags 0 or 1, everything finite). A scenario file is also built under
+    the options (ScenarioFileError: a bad value, an area lying across a wall)."""
+    file = scenario_file(name)
+    valid = file.options
     for key, value in options.items():
         if key not in valid:
             raise ValueError(f"scenario {name!r} has no option {key!r};{did_you_mean(key, valid)} valid options: "
@@ -259,11 +200,25 @@ def check_options(name: str, options: Mapping[str, float]) -> None:
             raise ValueError(f"scenario option {key} must be > 0 m, got {value!r}")
         if key == "density" and value < 0:
             raise ValueError(f"scenario option density must be >= 0 people/m^2, got {value!r}")
-        if key in _FLAGS and value not in (0.0, 1.0):
+        if key in file.flags and value not in (0.0, 1.0):
             raise ValueError(f"scenario option {key} is a flag: 0 or 1, got {value!r}")
+    if is_scenario_file(name):
+        _build(file, dict(options))
 
 
 def make_scenario(name: str, options: Mapping[str, float] | None = None) -> Scenario:
-    """Build a registered scenario; an unknown name or option raises a ValueError listing the valid ones."""
-    check_options(name, dict(options or {}))
-    return SCENARIOS[name](dict(options or {}))
+    """Build a scenario: a built-in by name (`SCENARIOS`) or a scenario file by its path (ending in .toml), under
+    `options` (the file's defaults for the others). An unknown name or option raises a ValueError listing the valid
+    ones; a bad file, or an area lying across a wall, a ScenarioFileError naming the file."""
+    opt = dict(options or {})
+    check_options(name, opt)
+    return _build(scenario_file(name), opt)
+
+
+def _build(file: ScenarioFile, options: dict[str, float]) -> Scenario:
+    fields = file.fields(options)
+    fields["flows"] = tuple(Flow(spawn, target) for spawn, target in fields["flows"])
+    try:
+        return Scenario(**fields, options=options)
+    except ValueError as exc:
+        raise ScenarioFileError(f"{file.source}: {exc}") from None

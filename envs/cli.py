@@ -23,6 +23,7 @@ from typing import Any
 
 from crowdsim.cli import OneLineParser, console_script, show_defaults  # the CLI conventions, shared with crowdsim
 from crowdsim.names import flag_values, os_error_line, unknown_name
+from crowdsim.scenarios import is_scenario_file
 from envs.cli_options import (
     OBSERVATION_POLICIES,
     add_backend_options,
@@ -66,7 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("evaluate", help="run policies over fixed episode seeds and report the metrics",
                        formatter_class=FMT)
     add_policy_options(e)
-    e.add_argument("--scenario", default="plaza", help="one of: " + ", ".join(scenario_names()))
+    e.add_argument("--scenario", default="plaza", metavar="NAME|PATH.toml",
+                   help="one of: " + ", ".join(scenario_names()) + "; or a scenario file (docs/crowdsim.md)")
     e.add_argument("--episodes", type=int, default=20, help="episodes (seeds seed .. seed + episodes - 1)")
     e.add_argument("--seed", type=int, default=0, help="first episode seed")
     e.add_argument("--json", type=Path, default=None, metavar="OUT",
@@ -147,8 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _config(args: argparse.Namespace) -> CrowdNavConfig:
-    if args.scenario not in scenario_names():
-        raise UsageError(unknown_name("scenario", args.scenario, scenario_names()))
+    if args.scenario not in scenario_names() and not is_scenario_file(args.scenario):
+        raise UsageError(unknown_name("scenario", args.scenario, scenario_names()) + "; or a .toml scenario file")
     replay = args.scenario == REPLAY_SCENARIO
     kw: dict[str, Any] = {"scenario": args.scenario}
     if replay:

@@ -8,6 +8,7 @@ from typing import Any
 
 from crowdsim import SCENARIOS, GroupConfig, SimConfig
 from crowdsim.names import unknown_name
+from crowdsim.scenarios import is_scenario_file, scenario_file
 from envs.crowds.models import DEFAULT_CROWD_MODEL, REPLAY_SCENARIO, check_crowd_model
 from envs.crowds.orca import OrcaCrowdConfig
 from envs.timing import DEFAULT_TIMING
@@ -117,7 +118,8 @@ class ObservationConfig:
 class CrowdNavConfig:
     """The env: a crowd scenario, a robot with a goal, rewards and observation options.
 
-    scenario: a crowdsim scenario name, or "replay" (then `replay` must be set).
+    scenario: a crowdsim scenario name, the path of a scenario file (ending in .toml, `crowdsim.scenario_files`), or
+        "replay" (then `replay` must be set).
     n_pedestrians: crowd size (simulated scenarios).
     scenario_options: crowdsim scenario overrides as (name, value) pairs.
     groups: group sizes and events (crowdsim's `GroupConfig`).
@@ -171,8 +173,10 @@ class CrowdNavConfig:
 
     def __post_init__(self) -> None:
         valid = (*sorted(SCENARIOS), REPLAY_SCENARIO)
-        if self.scenario not in valid:
-            raise ValueError(unknown_name("scenario", self.scenario, valid))
+        if is_scenario_file(self.scenario):
+            scenario_file(self.scenario)  # a bad file: one line naming the file and the key
+        elif self.scenario not in valid:
+            raise ValueError(unknown_name("scenario", self.scenario, valid) + "; or a .toml scenario file")
         if self.scenario == REPLAY_SCENARIO and self.replay is None:
             raise ValueError("scenario 'replay' needs replay=ReplayConfig(path=...)")
         if self.scenario != REPLAY_SCENARIO or self.crowd_model != DEFAULT_CROWD_MODEL:

@@ -199,6 +199,7 @@ def test_every_readme_command_runs_with_small_sizes(tmp_path, monkeypatch, capsy
         pytest.skip("../shared/datasets is not here")
     (tmp_path / "rec.txt").write_text(hotel.read_text())
     (tmp_path / "groups.txt").write_text("")
+    (tmp_path / "my_room.toml").write_text(toml_block())  # the scenario file docs/crowdsim.md shows, as shown
     monkeypatch.chdir(tmp_path)
     np.save("out_hist.npy", np.cumsum(np.full((8, 3, 2), 0.4), axis=0))
     Path("out").mkdir()
@@ -214,6 +215,12 @@ def test_every_readme_command_runs_with_small_sizes(tmp_path, monkeypatch, capsy
         assert mains[small[0]](small[1:]) == 0, (small, capsys.readouterr().err)
         ran += 1
     assert ran >= 10
+
+
+def toml_block() -> str:
+    """The scenario file of docs/crowdsim.md (its one ```toml block), as written there."""
+    (block,) = re.findall(r"^```toml\n(.*?)^```", (ROOT / "docs" / "crowdsim.md").read_text(), flags=re.S | re.M)
+    return block
 
 
 def tour_block() -> str:

@@ -100,8 +100,21 @@ class SimCrowd:
         return out
 
     def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """A start and a goal (2,) m for this scenario (see `ROUTES`; other scenarios: `side_to_side`)."""
+        """A start and a goal (2,) m for this scenario (see `ROUTES`; a scenario file with a [robot] table:
+        `area_route`; other scenarios: `side_to_side`)."""
+        if self.name not in ROUTES and self.sim.scenario.robot_start is not None:
+            return area_route(self, rng)
         return ROUTES.get(self.name, side_to_side)(self, rng)
+
+
+def area_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A scenario file's [robot] table: the start drawn uniformly in its start area, the goal in its goal area;
+    with both_ways, swapped in half of the episodes."""
+    scen = crowd.sim.scenario
+    (sx0, sy0, sx1, sy1), (gx0, gy0, gx1, gy1) = scen.robot_start, scen.robot_goal
+    start = np.array([rng.uniform(sx0, sx1), rng.uniform(sy0, sy1)])
+    goal = np.array([rng.uniform(gx0, gx1), rng.uniform(gy0, gy1)])
+    return (goal, start) if scen.robot_both_ways and rng.uniform() < 0.5 else (start, goal)
 
 
 def circle_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

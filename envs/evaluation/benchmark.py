@@ -42,7 +42,7 @@ class BenchmarkPlan:
 def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig, identity: list[Any] | None = None) -> str:
     """What an episode's record depends on: the suite version, the cell's definition, the policy config and the
     digest of the weight files it loads (`envs.policies.identity.policy_identity`, or `identity` when already known)."""
-    return fingerprint(suite.name, suite.version, cell.spec, cell.defaults,
+    return fingerprint(suite.name, suite.version, cell.fingerprint_spec, cell.defaults,
                        *(policy_identity(policy) if identity is None else identity))
 
 

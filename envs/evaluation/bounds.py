@@ -66,7 +66,8 @@ def run_bound_task(task: BoundTask) -> dict[str, Any]:
 
 
 def bound_fingerprint(suite: Suite, cell: Cell, config: ReachConfig) -> str:
-    return fingerprint(suite.name, suite.version, cell.spec, cell.defaults, "reach", METHOD_VERSION, asdict(config))
+    return fingerprint(suite.name, suite.version, cell.fingerprint_spec, cell.defaults, "reach", METHOD_VERSION,
+                       asdict(config))
 
 
 def read_bounds(path: str | Path) -> dict[tuple[str, int], dict[str, Any]]:

@@ -18,6 +18,7 @@ from contextlib import closing
 from pathlib import Path
 from typing import Any
 
+from crowdsim.scenarios import is_scenario_file, scenario_digest, scenario_label
 from envs.atomic import check_writable_dir, write_json_atomic, write_text_atomic
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.drawing.video import DEFAULT_SIZE_PX, check_video_options, video_name
@@ -70,8 +71,10 @@ class CtrlC:
 def config_summary(config: CrowdNavConfig) -> dict[str, Any]:
     """The settings a published number needs next to it (crowd size, visibility, kinematics, time limit, dt)."""
     replay = config.scenario == REPLAY_SCENARIO
+    from_file = {"scenario_sha256": scenario_digest(config.scenario)} if is_scenario_file(config.scenario) else {}
     return {
         "scenario": config.scenario,
+        **from_file,  # a scenario file's bytes: a changed file is not resumed into the records of the old one
         "n_pedestrians": None if replay else config.n_pedestrians,
         "robot_visible": None if replay else config.robot_visible,
         "scenario_options": [list(o) for o in config.scenario_options],
@@ -147,11 +150,12 @@ def evaluate(policy: str | PolicyConfig, config: CrowdNavConfig, episodes: int =
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(seed, seed + episodes))
+    where = scenario_label(config.scenario)  # a scenario file: its stem, in video names
     fp = fingerprint(config_summary(config), *policy_identity(pcfg))  # with the weights' digest
     tasks = [EpisodeTask(config, pcfg, s, fingerprint=fp, keep_scene=out is not None and i < draw,
                          rrd_path=str(out / f"{stem}_seed{s}.rrd") if out is not None and i < record else None,
                          error_dir=str(out / "errors") if out is not None else None,
-                         video=VideoSpec(str(out / "videos" / video_name(stem, config.scenario, s, video_format)),
+                         video=VideoSpec(str(out / "videos" / video_name(stem, where, s, video_format)),
                                          video_format, video_size) if out is not None and i < video else None)
              for i, s in enumerate(seeds)]
     start = time.perf_counter()

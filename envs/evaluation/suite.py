@@ -2,7 +2,8 @@
 
 A suite file `envs/evaluation/suites/<name>.json` holds {"name", "version", "description", "defaults", "cells": [...]}.
 A cell is either simulated ({"name", "scenario", "n_pedestrians", "robot_visible", "options"?, "episodes",
-"seed0"}) or a real-crowd replay ({"name", "replay": [files relative to the data folder], "frame_step_s",
+"seed0"}; "scenario" is a built-in name or a .toml scenario file, a relative path starting in the suites' folder)
+or a real-crowd replay ({"name", "replay": [files relative to the data folder], "frame_step_s",
 "episodes", "seed0", "groups"?, "group_overlaps"?}). `groups` maps a replayed file to its group file (both
 relative to the data folder, e.g. "../eth_ucy_groups/students003.groups.txt"); `group_overlaps` says what a
 pedestrian listed in two groups does ("merge", or the default "error"; `envs.crowds.replay.ReplayConfig`). A recording
@@ -30,6 +31,7 @@ from typing import Any
 
 from crowdsim import GroupConfig
 from crowdsim.names import did_you_mean, unknown_name
+from crowdsim.scenarios import is_scenario_file, scenario_digest
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig, ObservationConfig
 from envs.crowds.orca import OrcaCrowdConfig
 from planner import CROWD_MPC, MPCConfig, RobotConfig
@@ -39,6 +41,7 @@ DEFAULT_DATA = DEFAULT_DATA_DIR  # predictor.ethucy owns the ETH/UCY data path (
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
               "episodes", "seed0", "note", "scene", "predictor", "groups", "group_overlaps", "crowd_model", "orca",
               "robot", "observation"}
+SUITES_DIR = Path(__file__).resolve().parent / "suites"  # the shipped suites; a cell's relative .toml path starts here
 _SIM_ONLY_KEYS = {"crowd_model", "orca", "robot", "observation"}  # simulated cells only
 # cell key -> the frozen config its fields build
 _NESTED = {"orca": OrcaCrowdConfig, "robot": RobotConfig, "observation": ObservationConfig}
@@ -77,6 +80,21 @@ class Cell:
         """The predictor `mpc-gpgraph` uses in this cell unless one is given (None: the shipped default)."""
         return self.spec.get("predictor")
 
+    @property
+    def scenario(self) -> str:
+        """A simulated cell's scenario: a built-in name, or a scenario file's path (one relative to the suites'
+        folder, `envs/evaluation/suites/`, resolved there)."""
+        name = str(self.spec["scenario"])
+        return str(SUITES_DIR / name) if is_scenario_file(name) and not Path(name).is_absolute() else name
+
+    @property
+    def fingerprint_spec(self) -> dict[str, Any]:
+        """The cell's definition as its records' fingerprints hold it: a scenario file's cell adds the sha256 of
+        the file's bytes (an edited file is not resumed into the old records); other cells are their spec."""
+        if self.is_real or not is_scenario_file(str(self.spec["scenario"])):
+            return self.spec
+        return {**self.spec, "scenario_sha256": scenario_digest(self.scenario)}
+
     def files(self, data: Path) -> list[Path]:
         return [Path(data) / f for f in self.spec["replay"]]
 
@@ -104,7 +122,7 @@ class Cell:
                 kw[key] = cls(**self.spec[key])
         if "crowd_model" in self.spec:
             kw["crowd_model"] = str(self.spec["crowd_model"])
-        return CrowdNavConfig(scenario=self.spec["scenario"], n_pedestrians=n,
+        return CrowdNavConfig(scenario=self.scenario, n_pedestrians=n,
                               robot_visible=bool(self.spec["robot_visible"]),
                               scenario_options=tuple(sorted(self.spec.get("options", {}).items())),
                               groups=replace(GroupConfig(), max_size=min(GroupConfig().max_size, n)), **kw)

@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdsim.distributed import BACKENDS
+from crowdsim.scenarios import scenario_label
 from envs.atomic import write_json_atomic
 from envs.rl.config import QUICK, SCENARIO_DEFAULTS, TrainConfig
 from envs.rl.setting import TRAIN_SEED_OFFSET, add_setting_arguments
@@ -305,7 +306,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a short smoke run (about a minute on a laptop CPU; not a usable agent): "
                         + ", ".join(f"{k} {v}" for k, v in QUICK.items()) + "; other flags override these")
     add_setting_arguments(p)
-    scenario_help = {"scenario": (str, "crowdsim scenario to train in, without --suite (crowdsim.scenarios)"),
+    scenario_help = {"scenario": (str, "crowdsim scenario (or a .toml scenario file) to train in, without --suite"),
                      "pedestrians": (int, "pedestrians in the scenario, without --suite"),
                      "time_limit_s": (float, "episode time limit (s), without --suite")}
     for name, (typ, text) in scenario_help.items():
@@ -373,7 +374,7 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
         from envs.rl.imitation import check_rotatable
 
         check_rotatable(cfg.env_config())
-    out = args.resume or args.out or Path("out/train") / (cfg.env_cell or str(cfg.scenario))
+    out = args.resume or args.out or Path("out/train") / (cfg.env_cell or scenario_label(str(cfg.scenario)))
     if args.resume is None and (out / "checkpoints" / "latest.zip").exists():
         raise ValueError(f"{out} already holds a run; use --resume {out} or another --out")
     return cfg, out, args.resume is not None
