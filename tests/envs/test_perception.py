@@ -261,3 +261,16 @@ def test_a_suite_cell_turns_the_limited_view_on_through_its_observation_fields()
     with pytest.raises(ValueError, match="fov_deg"):
         suite({"fov_deg": 400})
 
+
+def test_crowdnav_evaluate_takes_the_view_flags_and_records_them(tmp_path, capsys):
+    import json
+
+    from envs.cli import main
+
+    out = tmp_path / "social-force.json"
+    code = main(["evaluate", "--policy", "social-force", "--scenario", "corridor", "--episodes", "1", "--workers", "1",
+                 "--pedestrians", "6", "--time-limit", "2", "--record", "0", "--fov-deg", "120", "--occlusion",
+                 "--json", str(out), "--out", str(tmp_path / "dir"), "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    config = json.loads(out.read_text())["config"]
+    assert (config["fov_deg"], config["occlusion"]) == (120.0, True)
