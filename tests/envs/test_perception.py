@@ -274,3 +274,4 @@ def test_crowdnav_evaluate_takes_the_view_flags_and_records_them(tmp_path, capsy
     assert code == 0, capsys.readouterr().err
     config = json.loads(out.read_text())["config"]
     assert (config["fov_deg"], config["occlusion"]) == (120.0, True)
+    assert "(unicycle), field of view 120 deg, occlusion, time limit 2 s" in capsys.readouterr().out
