@@ -83,6 +83,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--time-limit", type=float, default=None, metavar="S", help="episode time limit, s (default 40)")
     e.add_argument("--wall-rays", type=int, default=None, metavar="R",
                    help="observe R range rays to the walls (for agents trained with crowdnav train --wall-rays R)")
+    e.add_argument("--fov-deg", type=float, default=None, metavar="DEG",
+                   help="the robot's field of view around its heading, degrees in (0, 360] (default 360: all round); "
+                   "people outside it are hidden from every policy (ObservationConfig.fov_deg, docs/envs.md)")
+    e.add_argument("--occlusion", action="store_true",
+                   help="walls and people's bodies hide the people behind them from every policy "
+                   "(ObservationConfig.occlusion)")
     e.add_argument("--record", type=int, default=0, metavar="R",
                    help="rerun recordings (.rrd) of the first R episodes (about 11 MB per plaza episode)")
     add_video_options(e)
@@ -181,10 +187,11 @@ def _config(args: argparse.Namespace) -> CrowdNavConfig:
         kw["crowd_model"] = args.crowd_model
         if args.crowd_model == "orca":
             kw["dt_s"] = 0.05  # divides both ORCA's 0.25 s step and the predictor's 0.4 s (envs.crowds.orca)
-    if args.wall_rays is not None:
+    seen = {"wall_rays": args.wall_rays, "fov_deg": args.fov_deg, "occlusion": args.occlusion or None}
+    if any(v is not None for v in seen.values()):
         from envs.config import ObservationConfig
 
-        kw["observation"] = ObservationConfig(wall_rays=args.wall_rays)
+        kw["observation"] = ObservationConfig(**{k: v for k, v in seen.items() if v is not None})
     config = CrowdNavConfig(**kw)
     from envs.crowds.models import DEFAULT_CROWD_MODEL, make_crowd
 

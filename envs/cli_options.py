@@ -268,6 +268,8 @@ def check_env_flags(args: argparse.Namespace) -> None:
     for flag, value in (("--time-limit", args.time_limit), ("--frame-step", args.frame_step)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise ValueError(f"{flag} must be a positive finite number of seconds, got {value}")
+    if args.fov_deg is not None and not 0 < args.fov_deg <= 360:
+        raise ValueError(f"--fov-deg must be in (0, 360] degrees (360: all round), got {args.fov_deg}")
 
 
 def check_input_files(args: argparse.Namespace) -> None:

@@ -73,6 +73,16 @@ class ObservationConfig:
     sensor_gap_m: pedestrians whose surface gap from the robot (centre distance minus both radii) is larger than this
         are hidden from every policy: the observation and the planners' `PolicyView` (pedestrians, history,
         future). CrowdNav++'s robot sensor_range (5 m); inf (default): nobody is hidden by it, m.
+    fov_deg: the sensor's field of view, centred on its heading (a unicycle's heading; a holonomic robot's direction
+        of motion, kept while it stands, the goal's direction at the start), degrees in (0, 360]; a pedestrian is
+        perceived only if some part of their body disc lies inside it (`envs.perception`). 360 (default): all round.
+    occlusion: whether walls and other pedestrians' bodies hide a pedestrian: perceived only if the sight line from
+        the robot's centre to their centre or to one of their disc's two tangent points is clear
+        (`envs.perception`). False (default): the sensor sees through everything.
+        Whom fov_deg and occlusion hide (with sensor_gap_m) is hidden from every policy input: the observation, the
+        `PolicyView` (pedestrians, history, future) and the predictor's input; the history forgets a pedestrian the
+        moment they are out of sight, so one who comes back is a newcomer (`envs.history`'s back-fill). Metrics and
+        collisions still count everybody.
     position_bound_m: Box bound on every relative position; values are clipped to it, m.
     speed_bound_mps: Box bound on velocities, m/s.
     group_source: "truth" (the simulator's labels) or "predicted" (the predictor's assignment).
@@ -87,6 +97,8 @@ class ObservationConfig:
     max_pedestrians: int = 20
     sensor_range_m: float = 10.0
     sensor_gap_m: float = math.inf
+    fov_deg: float = 360.0
+    occlusion: bool = False
     position_bound_m: float = 40.0
     speed_bound_mps: float = 5.0
     group_source: str = "truth"
@@ -106,12 +118,21 @@ class ObservationConfig:
         _positive(self, ("sensor_range_m", "position_bound_m", "speed_bound_mps", "wall_range_m"))
         if not (isinstance(self.sensor_gap_m, int | float) and self.sensor_gap_m > 0):  # inf allowed
             raise ValueError(f"sensor_gap_m must be > 0 (inf: nobody hidden), got {self.sensor_gap_m!r}")
+        if isinstance(self.fov_deg, bool) or not (isinstance(self.fov_deg, int | float) and 0 < self.fov_deg <= 360):
+            raise ValueError(f"fov_deg must be a number in (0, 360] (360: all round), got {self.fov_deg!r}")
+        if not isinstance(self.occlusion, bool):
+            raise ValueError(f"occlusion must be a bool, got {self.occlusion!r}")
         if self.group_source not in GROUP_SOURCES:
             raise ValueError(f"unknown group_source {self.group_source!r}; valid: {', '.join(GROUP_SOURCES)}")
 
     @property
     def needs_predictor(self) -> bool:
         return self.predictions or self.group_source == "predicted"
+
+    @property
+    def limited_view(self) -> bool:
+        """Whether the field of view or occlusion can hide anyone (`envs.perception`; False by default)."""
+        return self.fov_deg < 360 or self.occlusion
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ from envs.crowds.models import make_crowd
 from envs.drawing.frame import SceneFrame
 from envs.history import TRACK_ROWS, PedHistory
 from envs.observation import build_observation, observation_space
+from envs.perception import perceived, sensor_heading
 from envs.prediction import load_predictor_spec, predict
 from envs.rewards import StepFacts, reward_terms, weighted
 from envs.scoring.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
@@ -46,6 +47,16 @@ class CrowdNavEnv(gym.Env):
     Actions outside [-1, 1]^2 are clipped to it; an action with NaN or inf, or of the wrong shape, raises
     a ValueError. Unicycle: a[0] maps linearly to speed [-min_speed, max_speed] m/s and a[1] to yaw rate
     [-max, max] rad/s; holonomic: a * max_speed (vx, vy) m/s, norm-clipped.
+
+    Perception (`ObservationConfig`): a pedestrian is perceived when within `sensor_gap_m` (surface gap; default inf),
+    when some part of their disc lies in the `fov_deg` field of view around the sensor's heading (default 360: all
+    round) and, with `occlusion` (default False), when a sight line to them is clear of walls and other people's
+    bodies (`envs.perception`). Every policy input holds the perceived pedestrians only: the observation, `view()`
+    (pedestrians, history, track, and the reference policies' true future: the oracle predicts perfectly whom it
+    perceives and knows nothing of the others) and the predictor's input. With `fov_deg` < 360 or `occlusion` the
+    history also holds only what was perceived: a pedestrian out of sight is forgotten, and comes back as one who
+    has just come into view (back-filled, `envs.history`); people hidden at the start (the warmup is watched by
+    all-seeing eyes) are forgotten at reset. The metrics, rewards and collisions count everybody.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -81,6 +92,12 @@ class CrowdNavEnv(gym.Env):
         self._pred_groups: np.ndarray | None = None
         self._walls = WallIndex(self.crowd.walls)  # the walls never change: precomputed for the per-step check
         self._peds_cache: tuple[CrowdState | None, Pedestrians | None] = (None, None)
+        self._limited = self.config.observation.limited_view  # fov_deg < 360 or occlusion (`envs.perception`)
+        self._placed = False  # whether the robot is in the scene (the limited view starts then)
+        self._heading_rad = 0.0  # a holonomic robot's sensor heading while it stands (`sensor_heading`)
+        self._seen_cache: tuple[CrowdState | None, int, np.ndarray | None] = (None, -1, None)
+        self._remembered: set[int] = set()  # the ids the histories hold (limited view)
+        self._pred_ids: np.ndarray | None = None  # the ids `_pred_samples` predicts (limited view)
         self._obs: dict[str, np.ndarray] = {}
 
     # ------------------------------------------------------------------------------------------ API
@@ -92,6 +109,7 @@ class CrowdNavEnv(gym.Env):
         self.crowd.clear_robot()
         self.history.clear()
         self.track_history.clear()
+        self._placed = False
         self.steps = self._sim_steps = 0
         self._state = state
         self._observe_arrivals()
@@ -109,6 +127,11 @@ class CrowdNavEnv(gym.Env):
         if cfg.robot.model == "unicycle":
             self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
         self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
+        self._placed, self._heading_rad = True, math.atan2(*(self.goal - start)[::-1])
+        self._seen_cache = (None, -1, None)
+        if self._limited:  # the people hidden from the start are forgotten
+            self._remembered = {int(i) for i in self._peds().ped_id}
+            self._observe_arrivals()
         self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels, start=tuple(start), goal=tuple(self.goal),
                                       goal_tolerance_m=cfg.goal_tolerance_m, dt_s=cfg.dt_s,
                                       robot_radius_m=cfg.robot.radius_m)
@@ -152,6 +175,8 @@ class CrowdNavEnv(gym.Env):
         self._step_start = (before_pos, before)
         dist_before = self._goal_distance()
         self.robot_state = step_robot(self.robot_state, control, cfg.dt_s, cfg.robot.model)
+        if self._limited:
+            self._heading_rad = self.sensor_heading()
         # 2. simulate (the robot body moves along the step's chord)
         self.crowd.set_robot(before_pos, (self.robot_state[:2] - before_pos) / cfg.dt_s, cfg.robot.radius_m)
         self._state = self.crowd.step()
@@ -252,8 +277,9 @@ class CrowdNavEnv(gym.Env):
         for less than 2.8 s, the rows before its first snapshot (or, if it came after the last tick, before now)
         run its velocity over its first 0.4 s in view backwards (`envs.history.extrapolate_back`): one who has
         just come into view is seen walking, not standing (zero velocity only at the instant it appears). `p`: the
-        rows to give (default `pedestrians()`). `rows`: the newest rows only, (rows, N, 2), the same floats."""
-        p = self.pedestrians() if p is None else p
+        rows to give (default `pedestrians()`; with a limited view, `perceived_pedestrians()`: the history holds no
+        one else). `rows`: the newest rows only, (rows, N, 2), the same floats."""
+        p = self._remembered_people() if p is None else p
         tick = self.config.ticks_per_prediction_step
         return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s, rows)
 
@@ -261,11 +287,21 @@ class CrowdNavEnv(gym.Env):
         """(TRACK_ROWS = 48, N, 2) m: the same pedestrians' longer past for a group rule (`predictor.api`'s `track`),
         0.4 s apart, the last row now: its newest obs_len rows are `history_window`'s (`window`, when the caller has
         it already), the older ones their recorded positions, NaN before each pedestrian was first seen
-        (`envs.history.PedHistory.track_now`)."""
-        p = self.pedestrians() if p is None else p
+        (`envs.history.PedHistory.track_now`). `p`: as `history_window`'s."""
+        p = self._remembered_people() if p is None else p
         window = self.history_window(p) if window is None else window
         tick = self.config.ticks_per_prediction_step
         return self.track_history.track_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, window)
+
+    def perceived_pedestrians(self) -> Pedestrians:
+        """The rows of `pedestrians()` the sensor perceives now (`ObservationConfig`'s sensor_gap_m, fov_deg and
+        occlusion; all of them by default): who every policy input holds."""
+        return self._sensed(self.pedestrians())
+
+    def sensor_heading(self) -> float:
+        """The direction the sensor faces now, rad (`envs.perception.sensor_heading`): a unicycle's heading; a
+        holonomic robot's direction of motion, or while it stands its last one (the goal's direction at the start)."""
+        return sensor_heading(self.robot_state, self.config.robot.model == "unicycle", self._heading_rad)
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped
@@ -315,10 +351,19 @@ class CrowdNavEnv(gym.Env):
     # ---------------------------------------------------------------------------------- internals
     def _observe_arrivals(self) -> None:
         p = self._peds()
+        if self._limited and self._placed:  # only the perceived; whoever went out of sight is forgotten
+            p = self._rows(p, self._sensor_mask(p))
+            ids = {int(i) for i in p.ped_id}
+            gone = sorted(self._remembered - ids)
+            self.history.forget(gone)
+            self.track_history.forget(gone)
+            self._remembered = ids
         self.history.observe(self._sim_steps * self.config.dt_s, p.ped_id, p.pos)
 
     def _record_tick(self) -> None:
         p = self._peds()
+        if self._limited and self._placed:
+            p = self._rows(p, self._sensor_mask(p))
         self.history.record(p.ped_id, p.pos)
         self.track_history.record(p.ped_id, p.pos)
 
@@ -350,13 +395,19 @@ class CrowdNavEnv(gym.Env):
         if self._predictor is None:  # torch is loaded only when predictions are observed
             self._predictor = load_predictor_spec(self.config.observation.predictor, threads=None, timing=self.timing)
         k = self.config.observation.n_prediction_samples
-        window = self.history_window()
-        track = self.track_window(window=window) if getattr(self._predictor, "reads_track", False) else None
+        p = self._remembered_people()
+        window = self.history_window(p)
+        track = self.track_window(p, window) if getattr(self._predictor, "reads_track", False) else None
         self._pred_samples, self._pred_groups = predict(self._predictor, window, k, self._pred_rng,
                                                         self.timing.pred_len, track)
+        self._pred_ids = p.ped_id if self._limited else None
+
+    def _remembered_people(self) -> Pedestrians:
+        """Whom the history holds now: `pedestrians()`, or with a limited view `perceived_pedestrians()`."""
+        return self.perceived_pedestrians() if self._limited and self._placed else self.pedestrians()
 
     def _sensed(self, p: Pedestrians) -> Pedestrians:
-        """The rows of `p` within the sensor's surface gap (`ObservationConfig.sensor_gap_m`; all when it is inf)."""
+        """The rows of `p` (`pedestrians()` now) the sensor perceives (`_sensor_mask`)."""
         return self._rows(p, self._sensor_mask(p))
 
     @staticmethod
@@ -365,29 +416,66 @@ class CrowdNavEnv(gym.Env):
         return p if keep is None else Pedestrians(*(a[keep] for a in (p.pos, p.vel, p.radius, p.group_id, p.ped_id)))
 
     def _sensor_mask(self, p: Pedestrians) -> np.ndarray | None:
-        """(N,) bool: the rows of `p` within the sensor's surface gap; None when every row is (or the gap is inf)."""
+        """(N,) bool: the rows of `p` (`pedestrians()` now, in its row order) the sensor perceives: within its
+        surface gap and, with a limited view, in its field of view and line of sight (`_seen`); None when every row
+        is (always so by default: the gap inf, 360 degrees, no occlusion)."""
         gap = self.config.observation.sensor_gap_m
+        seen = self._seen(p) if self._limited and self._placed else None
         if not math.isfinite(gap) or len(p.pos) == 0:
-            return None
+            return seen
         d = p.pos - self.robot_state[:2]
         keep = np.sqrt((d * d).sum(-1)) - p.radius - self.config.robot.radius_m <= gap
+        if seen is not None:
+            keep &= seen
         return None if keep.all() else keep
+
+    def _seen(self, p: Pedestrians) -> np.ndarray | None:
+        """(N,) bool: the rows of `p` (all pedestrians now) in the field of view and line of sight
+        (`envs.perception.perceived`), computed once per state; None when every row is."""
+        state, step, seen = self._seen_cache
+        if state is not self._state or step != self._sim_steps:
+            obs = self.config.observation
+            keep = perceived(self.robot_state[:2], self.sensor_heading(), p.pos, p.radius,
+                             self._walls.segments.reshape(-1, 4), obs.fov_deg, obs.occlusion)
+            seen = None if keep.all() else keep
+            self._seen_cache = (self._state, self._sim_steps, seen)
+        return seen
 
     def _observe(self) -> dict[str, np.ndarray]:
         cfg, p = self.config, self._peds()
-        groups, samples = p.group_id, None
-        if cfg.observation.needs_predictor and self._pred_samples is not None \
-                and self._pred_samples.shape[2] == len(p.pos):  # rows change only between ticks
-            samples = self._pred_samples
-            if cfg.observation.group_source == "predicted":
-                groups = self._pred_groups
-        keep = self._sensor_mask(p)
-        if keep is not None:
-            p, groups = self._rows(p, keep), groups[keep]  # the mask once, for the rows and their groups
-            samples = None if samples is None else samples[:, :, keep]
+        if self._limited:
+            p, groups, samples = self._perceived_predictions(p)
+        else:
+            groups, samples = p.group_id, None
+            if cfg.observation.needs_predictor and self._pred_samples is not None \
+                    and self._pred_samples.shape[2] == len(p.pos):  # rows change only between ticks
+                samples = self._pred_samples
+                if cfg.observation.group_source == "predicted":
+                    groups = self._pred_groups
+            keep = self._sensor_mask(p)
+            if keep is not None:
+                p, groups = self._rows(p, keep), groups[keep]  # the mask once, for the rows and their groups
+                samples = None if samples is None else samples[:, :, keep]
         time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
                                  p.pos, p.vel, p.radius, groups, samples, self._walls.segments)
+
+    def _perceived_predictions(self, p: Pedestrians) -> tuple[Pedestrians, np.ndarray, np.ndarray | None]:
+        """With a limited view: the perceived rows of `p` (all pedestrians now), their groups and their predicted
+        samples (K, 12, n, 2) m. The predictor ran on the tick's perceived people (`_pred_ids`); as when rows change
+        between ticks, if someone perceived now has no prediction then nobody's is observed (samples None, groups
+        the truth)."""
+        p = self._rows(p, self._sensor_mask(p))
+        groups, samples = p.group_id, None
+        pred_ids = self._pred_ids
+        if self.config.observation.needs_predictor and self._pred_samples is not None and pred_ids is not None:
+            where = {int(i): k for k, i in enumerate(pred_ids)}
+            at = [where.get(int(i), -1) for i in p.ped_id]
+            if -1 not in at:
+                samples = self._pred_samples[:, :, at]
+                if self.config.observation.group_source == "predicted":
+                    groups = self._pred_groups[at]
+        return p, groups, samples
 
     def _facts(self, before_pos: np.ndarray, before: CrowdState, dist_before: float) -> StepFacts:
         """Distances, contact and intrusion of the step just simulated (`before`: the crowd at its start)."""

@@ -85,6 +85,21 @@ class PedHistory:
             if age >= EARLY_WINDOW_S - 1e-9:
                 self._young.discard(i)
 
+    def forget(self, ped_ids: list[int]) -> None:
+        """Drop pedestrians ped_ids from every kept snapshot and from the arrivals, as if never seen: one who comes
+        back is a newcomer, back-filled from its new early velocity (the env's limited view, `envs.perception`:
+        someone out of sight is not in the history). Ids not held are ignored."""
+        if not ped_ids:
+            return
+        gone = np.asarray(sorted(int(i) for i in ped_ids))
+        kept = [(ids, pos) if not (hit := np.isin(ids, gone)).any() else (ids[~hit], pos[~hit])
+                for ids, pos in self._snaps]
+        self._snaps = deque(kept, maxlen=self.length)
+        for i in gone.tolist():
+            self._arrivals.pop(i, None)
+        self._young -= set(gone.tolist())
+        self._ids_key = b""  # the next `observe` rebuilds the rows from what is left
+
     def early_velocity(self, ped_id: np.ndarray) -> np.ndarray:
         """(n, 2) m/s: each pedestrian's mean velocity over its first `EARLY_WINDOW_S` in view (so far, if it came
         more recently); zero for one seen at a single instant or never observed."""

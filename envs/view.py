@@ -36,15 +36,17 @@ class PolicyView:
 
     obs: the observation the env returned last (the Dict of `envs.observation`), for learned agents.
     robot_state: (nz,) the planner's state (unicycle x, y, heading, v, omega; holonomic x, y, vx, vy).
-    goal: (2,). robot: the robot's `RobotConfig`. pedestrians: those in the scene now.
+    goal: (2,). robot: the robot's `RobotConfig`. pedestrians: those the robot perceives now (everyone in the scene by
+        default; `ObservationConfig`'s sensor_gap_m, fov_deg and occlusion hide the others from every field here).
     history: (obs_len, N, 2) their positions `timing.step_s` apart, the last row now (rows of `pedestrians`); None
         for a policy that declares `reads_history = False` (learned agents: the window costs ~0.1-0.2 ms a step);
         its newest k rows for one that declares `reads_history = k` (an int: the shielded agents read 2).
     walls: (W, 4) wall segments x0, y0, x1, y1. timing: the prediction timing. dt_s: the env step, s.
     future: privileged, for reference policies only (`reads_future = True`, e.g. `mpc-oracle`): where the
-        pedestrians will be, (T, N, 2) m at +step_s ... +T step_s (rows of `pedestrians`), T = pred_len or more for
-        a reference that plans farther (its `future_s`), NaN where one will have left
-        (`envs.crowds.crowd.Crowd.future`); None for every other policy.
+        perceived pedestrians will be (a perfect prediction of whom it perceives; the hidden stay unknown), (T, N, 2)
+        m at +step_s ... +T step_s (rows of `pedestrians`), T = pred_len or more for a reference that plans farther
+        (its `future_s`), NaN where one will have left (`envs.crowds.crowd.Crowd.future`); None for every other
+        policy.
     track: (48, N, 2) their longer past on the history's grid, NaN before each was first seen (`CrowdNavEnv.
         track_window`), for a policy that declares `reads_track = True` (one whose predictor groups by a rule:
         the rule reads the track); None otherwise.

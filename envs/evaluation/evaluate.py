@@ -72,9 +72,12 @@ def config_summary(config: CrowdNavConfig) -> dict[str, Any]:
     """The settings a published number needs next to it (crowd size, visibility, kinematics, time limit, dt)."""
     replay = config.scenario == REPLAY_SCENARIO
     from_file = {"scenario_sha256": scenario_digest(config.scenario)} if is_scenario_file(config.scenario) else {}
+    obs = config.observation
+    limited = {"fov_deg": obs.fov_deg, "occlusion": obs.occlusion} if obs.limited_view else {}
     return {
         "scenario": config.scenario,
         **from_file,  # a scenario file's bytes: a changed file is not resumed into the records of the old one
+        **limited,  # a limited view (fov_deg, occlusion) only where set: every other summary stays as it was
         "n_pedestrians": None if replay else config.n_pedestrians,
         "robot_visible": None if replay else config.robot_visible,
         "scenario_options": [list(o) for o in config.scenario_options],

@@ -103,8 +103,10 @@ def describe_config(result: dict[str, Any]) -> str:
              f"{c.get('n_pedestrians')} pedestrians, {'visible' if c.get('robot_visible') else 'invisible'} robot")
     seeds = f"seeds {result['seed']}..{result['seed'] + result['episodes'] - 1}" if result.get("seed") is not None \
         else f"{result['episodes']} episodes"
-    return (f"{c.get('scenario')}: {crowd} ({c.get('robot_model')}), time limit {fmt(c.get('time_limit_s'), 0)} s, "
-            f"dt {c.get('dt_s')} s, {seeds}")
+    view = "" if "fov_deg" not in c else \
+        f", field of view {c['fov_deg']:g} deg{', occlusion' if c.get('occlusion') else ''}"  # limited only
+    return (f"{c.get('scenario')}: {crowd} ({c.get('robot_model')}){view}, time limit {fmt(c.get('time_limit_s'), 0)} "
+            f"s, dt {c.get('dt_s')} s, {seeds}")
 
 
 def predictor_text(result: dict[str, Any]) -> str:
