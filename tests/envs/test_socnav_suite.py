@@ -101,10 +101,14 @@ def test_group_cells_hold_their_group_at_every_seed(name, sizes):
 def test_the_doorway_group_stands_in_a_circle_beside_the_door():
     for seed in SUITE.cell("doorway-group-visible").seeds:
         env, _ = _people_at_start("doorway-group-visible", seed)
+        still = np.array([-1.0, 0.0], np.float32)  # the robot stays put (speed 0)
         for _ in range(20):
-            env.step(np.array([-1.0, 0.0], np.float32))  # the robot stays put (speed 0)
+            env.step(still)
+        before = env.pedestrians().pos  # 2 s in: the last members have found their places
+        for _ in range(30):
+            env.step(still)
         p = env.pedestrians()
-        assert np.linalg.norm(p.vel, axis=1).max() < 0.2  # standing
+        assert np.linalg.norm(p.pos - before, axis=1).max() < 0.35  # standing (shuffling a little) for 3 s
         assert len(env.crowd.sim.book.stops) == 1  # crowdsim's stop: an F-formation
         centre = p.pos.mean(axis=0)
         assert 8.0 < centre[0] < 11.0 and 4.6 < centre[1] < 6.4  # beside the door's far side (x = 8, y 3.4-4.6)
@@ -129,3 +133,32 @@ def test_the_encounter_is_set_up_when_the_robot_sets_off(name):
             assert offset @ heading < -2.0 and p.vel[0] @ heading > 0.8  # behind, walking its way
         else:  # coming down the hallway the robot turns into, above the junction
             assert p.pos[0][1] > 6.0 and p.vel[0][1] < -0.8 and env.goal[1] > 6.0
+
+
+def test_a_cell_sets_its_crowds_groups_and_behaviour_and_misspellings_are_refused():
+    from envs.evaluation.suite import parse_suite
+
+    cell = SUITE.cell("doorway-group-visible").env_config(0)
+    assert (cell.groups.size_poisson_rate, cell.groups.max_size) == (30.0, 3)  # max_size stays min(5, people)
+    assert cell.behaviour.stop_rate_hz > 0 and cell.sim_config().behaviour == cell.behaviour
+    assert SUITE.cell("frontal-visible").env_config(0).behaviour.stop_rate_hz == 0  # default: nobody stops
+    base = {"name": "x", "scenario": "corridor", "n_pedestrians": 4, "robot_visible": True, "episodes": 1, "seed0": 0}
+    for key, bad in (("crowd_groups", {"size_rate": 3.0}), ("behaviour", {"stop_hz": 1.0})):
+        with pytest.raises(ValueError, match=f"{key} must map .*unknown: \\['{next(iter(bad))}'\\]"):
+            parse_suite({"name": "s", "version": 1, "cells": [{**base, key: bad}]})
+    replay = {"name": "r", "replay": ["a.txt"], "frame_step_s": 0.4, "episodes": 1, "seed0": 0,
+              "crowd_groups": {"max_size": 2}}
+    with pytest.raises(ValueError, match="a replay cell takes no"):
+        parse_suite({"name": "s", "version": 1, "cells": [replay]})
+
+
+def test_benchmark_first_episodes_runs_the_first_seeds_only(tmp_path):
+    from envs.cli import main
+    from envs.evaluation.records import read_records
+
+    out = tmp_path / "run"
+    assert main(["benchmark", "--suite", "socnav-scenarios", "--cells", "frontal-invisible", "--first-episodes", "2",
+                 "--policy", "random", "--out", str(out), "--workers", "1", "--no-progress"]) == 0
+    assert sorted(r.seed for r in read_records(out / "records.jsonl")) == [0, 1]
+    assert main(["benchmark", "--suite", "socnav-scenarios", "--cells", "frontal-invisible", "--first-episodes", "0",
+                 "--policy", "random", "--out", str(out), "--no-progress"]) == 2
