@@ -108,6 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "paired comparisons", formatter_class=FMT)
     b.add_argument("--suite", required=True, help="suite name (crowdnav suites lists them)")
     b.add_argument("--cells", default=None, metavar="A,B", help="comma-separated cells of the suite (default all)")
+    b.add_argument("--first-episodes", type=int, default=None, metavar="N",
+                   help="a partial run: only the first N episodes (seeds) of each cell; the records are the full "
+                   "run's, so the same command without it (same --out) adds the rest")
     add_policy_options(b, required=False)
     b.set_defaults(policy=None)
     b.add_argument("--out", type=Path, required=True, metavar="DIR",
@@ -286,6 +289,10 @@ def _benchmark(args: argparse.Namespace) -> int:
     check_backend(args)
     suite = load_suite(args.suite)
     cells = suite.select(args.cells.split(",") if args.cells else None)
+    if args.first_episodes is not None:
+        if args.first_episodes < 1:
+            raise ValueError(f"--first-episodes must be >= 1, got {args.first_episodes}")
+        cells = [replace(c, seeds=c.seeds[:args.first_episodes]) for c in cells]
     args.policy = args.policy or ["mpc-gpgraph", "mpc-cv", "mpc-none", "social-force"]
     configs = policy_configs(args, suite)
     try:

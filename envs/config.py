@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from crowdsim import SCENARIOS, GroupConfig, SimConfig
+from crowdsim.config import BehaviourConfig
 from crowdsim.names import unknown_name
 from crowdsim.scenarios import is_scenario_file, scenario_file
 from envs.crowds.models import DEFAULT_CROWD_MODEL, REPLAY_SCENARIO, check_crowd_model
@@ -144,6 +145,8 @@ class CrowdNavConfig:
     n_pedestrians: crowd size (simulated scenarios).
     scenario_options: crowdsim scenario overrides as (name, value) pairs.
     groups: group sizes and events (crowdsim's `GroupConfig`).
+    behaviour: what the simulated people do besides walking in formation (crowdsim's `BehaviourConfig`: stops in
+        F-formations, meeting and parting, strangers walking close); the default turns every behaviour off.
     robot: robot body and kinematic limits (the planner's `RobotConfig`).
     robot_visible: whether pedestrians see the robot (social force + physical contact); invisible robots
         pass unseen, as in CrowdNav's invisible setting.
@@ -174,6 +177,7 @@ class CrowdNavConfig:
     n_pedestrians: int = 24
     scenario_options: tuple[tuple[str, float], ...] = ()
     groups: GroupConfig = field(default_factory=GroupConfig)
+    behaviour: BehaviourConfig = field(default_factory=BehaviourConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     robot_visible: bool = True
     dt_s: float = 0.1
@@ -241,6 +245,7 @@ class CrowdNavConfig:
 
         return SimConfig(
             scenario=self.scenario, n_pedestrians=self.n_pedestrians, record_dt_s=self.dt_s,
-            force_dt_s=min(self.dt_s, 0.1), groups=self.groups, scenario_options=self.scenario_options,
+            force_dt_s=min(self.dt_s, 0.1), groups=self.groups, behaviour=self.behaviour,
+            scenario_options=self.scenario_options,
             robot=RobotSlot(visible=self.robot_visible, radius_m=self.robot.radius_m),
         )

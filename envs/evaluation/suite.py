@@ -15,7 +15,9 @@ a replay cell with several files replays file (seed mod number of files) from a 
 episodes. A simulated cell may also name its `crowd_model` ("social-force", the default, or "orca":
 `envs.crowds.models`), the ORCA humans' settings `orca` (`envs.crowds.orca.OrcaCrowdConfig` fields) and the robot's
 `robot` (`planner.RobotConfig` fields; default the env's unicycle) and `observation` (`envs.config.ObservationConfig`
-fields, e.g. CrowdNav++'s 5 m sensor); unknown names or fields raise naming the valid ones.
+fields, e.g. CrowdNav++'s 5 m sensor), its crowd's `crowd_groups` (`crowdsim.GroupConfig` fields: group sizes; default
+max_size min(5, n_pedestrians)) and `behaviour` (`crowdsim.config.BehaviourConfig` fields: stops in F-formations,
+meeting and parting; default none); unknown names or fields raise naming the valid ones.
 A suite may set `planner` defaults for the planner policies run in it: {"replan_every_steps": k, "mpc": {MPCConfig
 field: value}} (e.g. CrowdNav's 0.25 s decision period, and settings chosen on the suite's tuning twin); the command
 line's --replan-every and --mpc still override them, and every record holds the config it ran.
@@ -30,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdsim import GroupConfig
+from crowdsim.config import BehaviourConfig
 from crowdsim.names import did_you_mean, unknown_name
 from crowdsim.scenarios import is_scenario_file, scenario_digest
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig, ObservationConfig
@@ -40,11 +43,13 @@ from predictor.ethucy import DEFAULT_DATA_DIR
 DEFAULT_DATA = DEFAULT_DATA_DIR  # predictor.ethucy owns the ETH/UCY data path (ETH_UCY_DIR overrides it)
 _CELL_KEYS = {"name", "scenario", "n_pedestrians", "robot_visible", "options", "replay", "frame_step_s",
               "episodes", "seed0", "note", "scene", "predictor", "groups", "group_overlaps", "crowd_model", "orca",
-              "robot", "observation"}
+              "robot", "observation", "crowd_groups", "behaviour"}
 SUITES_DIR = Path(__file__).resolve().parent / "suites"  # the shipped suites; a cell's relative .toml path starts here
-_SIM_ONLY_KEYS = {"crowd_model", "orca", "robot", "observation"}  # simulated cells only
-# cell key -> the frozen config its fields build
-_NESTED = {"orca": OrcaCrowdConfig, "robot": RobotConfig, "observation": ObservationConfig}
+_SIM_ONLY_KEYS = {"crowd_model", "orca", "robot", "observation", "crowd_groups", "behaviour"}  # simulated cells only
+# cell key -> the frozen config its fields build (and the env config field it sets)
+_NESTED = {"orca": OrcaCrowdConfig, "robot": RobotConfig, "observation": ObservationConfig,
+           "crowd_groups": GroupConfig, "behaviour": BehaviourConfig}
+_FIELD = {"crowd_groups": "groups"}  # a cell key whose env config field has another name
 SIMULATED_SCENE = "synthetic"
 _DEFAULT_KEYS = {"time_limit_s", "dt_s", "warmup_s", "goal_tolerance_m", "spawn_contact_ends_episode"}
 _PLANNER_KEYS = {"replan_every_steps", "mpc"}
@@ -117,15 +122,16 @@ class Cell:
                                         group_overlaps=str(self.spec.get("group_overlaps", "error")))
             return CrowdNavConfig(scenario=REPLAY_SCENARIO, **kw)
         n = int(self.spec["n_pedestrians"])
+        kw["groups"] = replace(GroupConfig(), max_size=min(GroupConfig().max_size, n))
         for key, cls in _NESTED.items():
             if key in self.spec:
-                kw[key] = cls(**self.spec[key])
+                base = kw["groups"] if key == "crowd_groups" else cls()
+                kw[_FIELD.get(key, key)] = replace(base, **self.spec[key])
         if "crowd_model" in self.spec:
             kw["crowd_model"] = str(self.spec["crowd_model"])
         return CrowdNavConfig(scenario=self.scenario, n_pedestrians=n,
                               robot_visible=bool(self.spec["robot_visible"]),
-                              scenario_options=tuple(sorted(self.spec.get("options", {}).items())),
-                              groups=replace(GroupConfig(), max_size=min(GroupConfig().max_size, n)), **kw)
+                              scenario_options=tuple(sorted(self.spec.get("options", {}).items())), **kw)
 
 
 @dataclass(frozen=True)
