@@ -253,6 +253,7 @@ def test_the_tour_runs_as_written_in_a_plain_shell(tmp_path):
     clone = tmp_path / "clone"
     clone.mkdir()
     (clone / ".venv").symlink_to(sys.prefix)  # what make demo made
+    (clone / "crowdsim").symlink_to(ROOT / "crowdsim")  # the tour reads a shipped scenario file by its path
     (tmp_path / "shared").symlink_to(shared.resolve())
     env = _plain_shell_env()
     plain = subprocess.run(["bash", "-c", "command -v crowdsim crowdnav gpgraph"], env=env, cwd=clone,
