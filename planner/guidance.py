@@ -9,7 +9,8 @@ several problems, each told which side to pass each nearby person on, and keeps 
    ``heading_offsets_deg`` from its direction and at ``speed_fractions`` of top speed, plus a standing path (brake,
    turning towards the goal): (C, H+1, state_dim) states and (C, H, 2) controls.
 2. **Score** (:func:`path_costs`): the MPC's own goal terms, plus ``risk_weight`` x each knot's shortfall below the
-   MPC's clearance from every constrained person's modes (mean over modes) and from every wall.
+   MPC's clearance from every constrained person's modes (mean over modes); a path nearer a wall than the MPC's wall
+   clearance is no option (+inf).
 3. **Passing sides** (:func:`passing_sides`): for each constrained person, how the bearing from them to the path
    turns over the horizon (the winding angle against their medoid future): +1 left, -1 right, 0 not passed (under
    ``min_winding_deg``, or never within ``relevance_m`` of the path). Paths with the same sides are one option.
@@ -93,13 +94,14 @@ def ped_gaps(points: np.ndarray, scene: SceneArrays) -> np.ndarray:
 def path_costs(states: np.ndarray, goal: np.ndarray, scene: SceneArrays, cfg: MPCConfig,
                gaps: np.ndarray) -> np.ndarray:
     """(C,) cost of each path (C, H+1, nz): the OCP's goal terms plus ``risk_weight`` x its summed shortfall below the
-    people's clearance (mean over modes, ``gaps`` from `ped_gaps`) and below the wall clearance."""
+    people's clearance (mean over modes, ``gaps`` from `ped_gaps`); +inf for a path that comes nearer a wall than the
+    MPC's wall clearance (never an option)."""
     w = cfg.weights
     d = np.sqrt(((states[:, 1:, :2] - goal) ** 2).sum(-1) + HUBER_M**2) - HUBER_M  # (C, H)
     cost = w.goal * d.sum(-1) + w.goal_terminal * d[:, -1]
     short = np.maximum(-np.where(np.isfinite(gaps), gaps, 0.0), 0.0).mean(-1).sum((-1, -2))
-    short = short + np.maximum(cfg.wall_clearance_m - wall_distances(states, scene), 0.0).sum(-1)
-    return cost + cfg.guidance.risk_weight * short
+    cost = cost + cfg.guidance.risk_weight * short
+    return np.where((wall_distances(states, scene) >= cfg.wall_clearance_m).all(-1), cost, np.inf)
 
 
 def wall_distances(states: np.ndarray, scene: SceneArrays) -> np.ndarray:

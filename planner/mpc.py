@@ -21,7 +21,6 @@ from planner.guidance import (
     ped_gaps,
     pick_options,
     side_map,
-    wall_distances,
 )
 from planner.ocp import OCP, build_ocp, pack_params, param_slices
 from planner.prediction import PedPrediction, current_positions, empty_prediction, validate_prediction
@@ -211,14 +210,14 @@ class MPCPlanner:
         now = np.full((ocp.sizes.m, 2), FAR_M) + state[:2]
         now[: scene.ped_index.size] = current_positions(prediction)[scene.ped_index]
         paths, path_controls = guidance_rollouts(state, goal, cfg)
-        finite = [t for t in free if np.all(np.isfinite(t.w))]
-        allstates = np.concatenate([paths, *(t.w[layout.z][None] for t in finite)])
+        finite = [bool(np.all(np.isfinite(t.w))) for t in free]
+        allstates = np.concatenate([paths, *(t.w[layout.z][None] for t, ok in zip(free, finite, strict=True) if ok)])
         gaps = ped_gaps(checked_points(allstates, ocp.sizes.sub), scene)
         sides = passing_sides(allstates, now, scene, gaps, cfg)
-        labelled = {id(t): side_map(s, scene.ped_index) for t, s in zip(finite, sides[len(paths):], strict=True)}
-        out = [replace(t, sides=labelled.get(id(t))) for t in free]
+        free_sides = iter(sides[len(paths):])  # one row per finite free try, in order
+        out = [replace(t, sides=side_map(next(free_sides), scene.ped_index)) if ok else t
+               for t, ok in zip(free, finite, strict=True)]
         costs = path_costs(paths, goal, scene, cfg, gaps[: len(paths)])
-        costs = np.where((wall_distances(paths, scene) >= cfg.wall_clearance_m).all(-1), costs, np.inf)
         slices = param_slices(ocp.sizes)
         for c in pick_options(costs, sides[: len(paths)], list(sides[len(paths):]), cfg.guidance.n_paths):
             normal, on = half_planes(paths[c], scene, gaps[c], cfg, state[:2])
