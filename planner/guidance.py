@@ -34,9 +34,9 @@ import numpy as np
 
 from planner.config import GuidanceConfig, MPCConfig
 from planner.dynamics import clip_control, step_numpy
+from planner.ocp import HUBER_M  # the OCP's goal cost: a path is scored as the NLP scores its plan
 from planner.scene import SceneArrays, point_segment_distances
 
-HUBER_M = 0.1  # as the OCP's goal cost
 MIN_NORMAL_M = 1e-6
 
 
