@@ -9,7 +9,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 CORE = ("crowdsim", "predictor", "planner")
-RL_MODULES = {"envs/rl/extractor.py", "envs/rl/imitation.py", "envs/rl/monitor.py", "envs/policies/sb3_actor.py"}
+RL_MODULES = {"envs/rl/extractor.py", "envs/rl/imitation.py", "envs/rl/monitor.py", "envs/rl/lagrangian.py",
+              "envs/policies/sb3_actor.py"}
 
 
 def _imports(path: Path) -> set[str]:

@@ -10,6 +10,9 @@ and the weights as `.pth` files. Here nothing pickled is ever loaded:
   other SB3 files the keys and shapes are read from the readable copy of the observation space;
 - the metadata's `decision_every_steps` (`DECISION_KEY`) is the agent's decision period: it acted every k env
   steps and held its action in between while training (`decision_period`; absent, as in older agents: 1).
+- an agent of one of the project's own SB3 subclasses (`LOCAL_ALGOS`, e.g. the constrained `PPOLagrangian`, whose
+  weights include a cost critic) names its class in `crowdnav.json` ("algorithm"), and loads as that class when
+  it extends the algorithm asked for (`sb3:PATH.zip` asks for PPO).
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ from envs.observation import mismatches, signature
 LAYOUT_ENTRY = "crowdnav.json"
 DECISION_KEY = "decision_every_steps"  # in crowdnav.json's "meta": env steps per agent decision
 SB3_ALGOS = ("PPO", "A2C", "SAC", "TD3", "DDPG")
+# The project's subclasses of SB3 algorithms: class name (recorded in crowdnav.json) -> (module, attribute)
+LOCAL_ALGOS = {"PPOLagrangian": ("envs.rl.lagrangian", "PPOLagrangian")}
 # Entries SB3 would unpickle that are safe to replace: SB3's default policy for a Dict observation and its
 # default buffers (None), constant schedules (only used when training) and no training state.
 _SAFE_REPLACEMENTS: dict[str, Any] = {
@@ -125,32 +130,54 @@ def saved_signature(data: dict[str, Any], layout: dict[str, Any] | None) -> dict
     return {"keys": keys} if keys else None
 
 
-def check_layout(path: Path, config: CrowdNavConfig) -> dict[str, Any]:
-    """The "data" entry of the agent in `path`; ValueError naming every difference between the agent's
-    observation and this env's."""
+def check_layout(path: Path, config: CrowdNavConfig) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The "data" and `crowdnav.json` entries of the agent in `path` (`read_agent`); ValueError naming every
+    difference between the agent's observation and this env's."""
     data, layout = read_agent(path)
     saved = saved_signature(data, layout)
     diff = [] if saved is None else mismatches(saved, signature(config))
     if diff:
         raise ValueError(f"{path}: the agent was trained on another observation layout: {'; '.join(diff)}")
-    return data
+    return data, layout
+
+
+def agent_class(algo: str, layout: dict[str, Any] | None) -> Any:
+    """The class to load an agent as: SB3's `algo`, or the project's subclass of it that the agent's
+    `crowdnav.json` names (`LOCAL_ALGOS`); ValueError for a class not on that list or not extending `algo`."""
+    import importlib
+
+    import stable_baselines3
+
+    base = getattr(stable_baselines3, algo)
+    name = (layout or {}).get("algorithm")
+    if name is None or name == algo:
+        return base
+    if name not in LOCAL_ALGOS:
+        raise ValueError(f"algorithm {name!r} is not on the allow-list of loadable classes "
+                         f"({', '.join([*SB3_ALGOS, *LOCAL_ALGOS])})")
+    module, attr = LOCAL_ALGOS[name]
+    cls = getattr(importlib.import_module(module), attr)
+    if not issubclass(cls, base):
+        raise ValueError(f"the agent is a {name}, which is not a kind of {algo}")
+    return cls
 
 
 def load_agent(path: Path, algo: str, env: Any) -> Any:
     """The SB3 model in `path` for this env (its spaces), loaded without unpickling; ValueError otherwise."""
     if not path.is_file():
         raise ValueError(f"no such file {path}")
-    data = check_layout(path, env.config)
+    data, layout = check_layout(path, env.config)
     custom = custom_objects(data, path)
-    import stable_baselines3
-
-    cls = getattr(stable_baselines3, algo)
+    try:
+        cls = agent_class(algo, layout)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
     custom.update(observation_space=env.observation_space, action_space=env.action_space,
                   policy_class=cls.policy_aliases["MultiInputPolicy"])
     try:
         return cls.load(path, custom_objects=custom, device="cpu")
     except LOAD_ERRORS as exc:
-        raise ValueError(f"{path}: cannot load as {algo} for this env ({str(exc).splitlines()[0]})") from exc
+        raise ValueError(f"{path}: cannot load as {cls.__name__} for this env ({str(exc).splitlines()[0]})") from exc
 
 
 def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
@@ -164,7 +191,9 @@ def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
 
 def save_agent(model: Any, path: Path, config: CrowdNavConfig, meta: dict[str, Any] | None = None) -> None:
     """Save atomically (a reader sees the old file or the complete new one) with `crowdnav.json` inside."""
-    layout = {"signature": signature(config), "meta": meta or {}}
+    layout: dict[str, Any] = {"signature": signature(config), "meta": meta or {}}
+    if type(model).__name__ in LOCAL_ALGOS:  # loaded as that class (`agent_class`); SB3's own need no entry
+        layout["algorithm"] = type(model).__name__
 
     def write(tmp: str) -> None:
         model.save(tmp)

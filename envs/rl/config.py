@@ -1,9 +1,11 @@
 """The settings of a training run (`TrainConfig`, saved as config.json): the env it trains in (a scenario, or a
-benchmark suite's cell), PPO's hyper-parameters, the warm start and the evaluation; `envs.rl.train` runs it."""
+benchmark suite's cell), PPO's hyper-parameters (and, for constrained PPO, the cost terms and budget), the warm start
+and the evaluation; `envs.rl.train` runs it."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -14,6 +16,7 @@ if TYPE_CHECKING:
     from envs.rl.mix import Mix
 
 WARM_STARTS = ("none", "bc", "dagger")
+LAGRANGE_FIELDS = ("cost_budget", "lambda_lr", "lambda_init")  # the multiplier's settings (constrained PPO only)
 # The env settings of a run without a suite (None in TrainConfig: not given). With a suite they come from its cell,
 # and giving any of them is an error.
 SCENARIO_DEFAULTS: dict[str, Any] = {"scenario": "circle_crossing", "pedestrians": 5, "invisible": True,
@@ -72,6 +75,11 @@ class TrainConfig:
     eval_seed: int = 100_000
     checkpoint_every_steps: int = 50_000
     threads: int = 1                  # torch threads in the learner process
+    # constrained PPO (envs.rl.lagrangian): cost terms and weights (envs.rl.cost), e.g. (("collision", 1.0),); (): PPO
+    constraint: tuple[tuple[str, float], ...] = ()
+    cost_budget: float | None = None  # mean episode cost allowed (cost units per episode); needed with constraint
+    lambda_lr: float = 0.05           # multiplier step per rollout per cost unit of excess (J_c - budget)
+    lambda_init: float = 0.0          # the multiplier at step 0 (reward units per cost unit)
 
     def __post_init__(self) -> None:
         self._resolve_env_fields()
@@ -92,6 +100,7 @@ class TrainConfig:
             raise ValueError(f"target_kl must be > 0 (or unset), got {self.target_kl}")
         if not (0 < self.gamma <= 1 and 0 < self.gae_lambda <= 1 and self.learning_rate > 0 and self.clip_range > 0):
             raise ValueError("gamma and gae_lambda must be in (0, 1], learning_rate and clip_range > 0")
+        self._check_constraint()
         self.env_config().sim_config()  # validates the scenario, crowd size (against the group sizes), rewards
         seeds = self.seed_ranges()
         for what, r in seeds.items():
@@ -117,6 +126,30 @@ class TrainConfig:
                 object.__setattr__(self, key, value)
         if not isinstance(self.pedestrians, int) or self.pedestrians < 1:
             raise ValueError(f"pedestrians must be an integer >= 1, got {self.pedestrians!r}")
+
+    def _check_constraint(self) -> None:
+        """The constraint's terms and weights (`envs.rl.cost.check_constraint`), and its budget and multiplier
+        settings: finite numbers, the budget and initial multiplier >= 0, the step > 0; without a constraint, none
+        of the three may differ from its default. Numbers are kept as floats."""
+        from envs.rl.cost import check_constraint
+
+        check_constraint(self.constraint)
+        defaults = {f.name: f.default for f in dataclasses.fields(self) if f.name in LAGRANGE_FIELDS}
+        if not self.constraint:
+            given = [f"--{k.replace('_', '-')}" for k, v in defaults.items() if getattr(self, k) != v]
+            if given:
+                raise ValueError(f"{', '.join(given)} only apply to constrained PPO; add --constraint TERM=WEIGHT")
+            return
+        if self.cost_budget is None:
+            raise ValueError("constrained PPO needs a cost budget (--cost-budget, mean cost per episode)")
+        for name in LAGRANGE_FIELDS:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if self.cost_budget < 0 or self.lambda_init < 0 or not self.lambda_lr > 0:
+            raise ValueError(f"cost_budget and lambda_init must be >= 0 and lambda_lr > 0, got {self.cost_budget}, "
+                             f"{self.lambda_init} and {self.lambda_lr}")
 
     def seed_ranges(self) -> dict[str, range]:
         """The reset seeds of every episode this run draws: training (the first reset of each env; later resets
@@ -176,6 +209,7 @@ class TrainConfig:
     def to_json(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
         d["rewards"] = {k: v for k, v in self.rewards}
+        d["constraint"] = {k: v for k, v in self.constraint}
         return d
 
     @classmethod
@@ -186,6 +220,32 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown setting(s) {unknown}; valid: {', '.join(sorted(fields))}")
         data = dict(data)
-        if "rewards" in data:
-            data["rewards"] = tuple((str(k), float(v)) for k, v in dict(data["rewards"]).items())
+        for key in ("rewards", "constraint"):  # TOML tables / JSON objects of term = weight
+            if key in data:
+                data[key] = tuple((str(k), _number(key, k, v)) for k, v in dict(data[key]).items())
         return cls(**data)
+
+
+def _number(table: str, key: str, value: Any) -> float:
+    """A weight of a term table as a float; ValueError naming it when it is not a number."""
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        raise ValueError(f"{table}.{key} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except ValueError:
+        raise ValueError(f"{table}.{key} must be a number, got {value!r}") from None
+
+
+def term_weights(key: str, items: list[str]) -> dict[str, float]:
+    """{term: weight} of the values of a repeatable --reward (key "rewards") or --constraint flag, each
+    TERM=WEIGHT[,TERM=WEIGHT...]; ValueError on a malformed one (`TrainConfig` checks the names)."""
+    flag, out = "--reward" if key == "rewards" else "--" + key, {}
+    for item in (part for value in items for part in value.split(",")):
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"{flag} {item!r}: expected TERM=WEIGHT with a number") from None
+    return out

@@ -105,7 +105,7 @@ class TrainMonitor(BaseCallback):
         # Ctrl-C: the step count whose weights the model holds (None while a PPO update changes them), and the
         # weights and optimiser state of the last rollout's start, taken before its update (`save_interrupted`)
         self.safe_steps: int | None = None
-        self.snapshot: tuple[int, dict, dict] | None = None
+        self.snapshot: tuple[int, dict, dict, dict | None] | None = None  # (+ constrained PPO's multiplier)
 
     # --------------------------------------------------------------------------------------- SB3 hooks
     def _on_training_start(self) -> None:
@@ -130,7 +130,7 @@ class TrainMonitor(BaseCallback):
     def _on_rollout_end(self) -> None:
         policy = self.model.policy  # the update that follows changes these: keep them as of the rollout's start
         self.snapshot = (int(self.safe_steps or 0), copy.deepcopy(policy.state_dict()),
-                         copy.deepcopy(policy.optimizer.state_dict()))
+                         copy.deepcopy(policy.optimizer.state_dict()), lagrangian_state(self.model))
         self.safe_steps = None
         steps, total = self.model.num_timesteps, self.cfg.total_steps
         elapsed = time.perf_counter() - self.t0
@@ -141,7 +141,7 @@ class TrainMonitor(BaseCallback):
         succ = self.model.ep_success_buffer
         rate_s = f"{np.mean(succ):.2f}" if len(succ) else "-"
         print(f"{steps:>9}/{total} steps  {rate:6.0f} steps/s  ETA {_hms(eta)}  return {ret:7.2f}  "
-              f"success(last {len(succ)}) {rate_s}", flush=True)
+              f"success(last {len(succ)}) {rate_s}{_constraint_note(self.model)}", flush=True)
 
     # ------------------------------------------------------------------------------------ evaluation
     def evaluate(self, model: Any) -> dict[str, float]:
@@ -203,9 +203,11 @@ class TrainMonitor(BaseCallback):
         meta = self._meta(model)
         save_agent(model, self.out / "checkpoints" / "latest.zip", self.env_config, meta)
         best_return = self.best_return if np.isfinite(self.best_return) else None
+        lagrangian = lagrangian_state(model)  # constrained PPO: the multiplier that a resumed run continues with
         write_json_atomic(self.out / "checkpoints" / "state.json",
                           {**meta, "best_success": self.best_success, "best_return": best_return,
-                           "next_eval": self.next_eval, "baseline": self.baseline})
+                           "next_eval": self.next_eval, "baseline": self.baseline,
+                           **({"lagrangian": lagrangian} if lagrangian is not None else {})})
 
     def save_interrupted(self, model: Any) -> int | None:
         """After Ctrl-C anywhere in training: save the last consistent state as checkpoints/latest.zip (the weights
@@ -214,9 +216,11 @@ class TrainMonitor(BaseCallback):
         if self.safe_steps is not None:
             steps = self.safe_steps
         elif self.snapshot is not None:
-            steps, policy, optimiser = self.snapshot
+            steps, policy, optimiser, lagrangian = self.snapshot
             model.policy.load_state_dict(policy)
             model.policy.optimizer.load_state_dict(optimiser)
+            if lagrangian is not None:
+                model.load_lagrangian_state(lagrangian)
         else:
             return None
         if not finite_parameters(model):
@@ -256,9 +260,27 @@ def load_checkpoint(model: Any, monitor: TrainMonitor, out: Path) -> None:
     baseline = state.get("baseline")  # absent in runs saved before it was kept
     monitor.baseline = None if baseline is None else (float(baseline[0]), float(baseline[1]))
     monitor.extra = {k: v for k, v in state.items() if k == "warm_start"}
+    if hasattr(model, "load_lagrangian_state"):  # constrained PPO continues with the saved multiplier
+        if "lagrangian" not in state:
+            raise ValueError(f"{out / 'checkpoints' / 'state.json'} holds no multiplier for constrained PPO")
+        model.load_lagrangian_state(state["lagrangian"])
     monitor.next_ckpt = (model.num_timesteps // monitor.cfg.checkpoint_every_steps + 1) \
         * monitor.cfg.checkpoint_every_steps
     print(f"resumed {out} at step {model.num_timesteps}", flush=True)
+
+
+def lagrangian_state(model: Any) -> dict[str, Any] | None:
+    """Constrained PPO's multiplier state (`PPOLagrangian.lagrangian_state`); None for plain PPO."""
+    return model.lagrangian_state() if hasattr(model, "lagrangian_state") else None
+
+
+def _constraint_note(model: Any) -> str:
+    """The progress line's tail for constrained PPO: the rollout's mean episode cost J_c and the multiplier."""
+    state = lagrangian_state(model)
+    if state is None:
+        return ""
+    cost = "-" if state["episode_cost"] is None else f"{state['episode_cost']:.3f}"
+    return f"  cost {cost} (budget {model.cost_budget:g})  lambda {state['multiplier']:.3f}"
 
 
 def eta_s(total: int, steps: int, rate: float) -> float:

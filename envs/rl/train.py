@@ -6,13 +6,17 @@
     crowdnav train --resume out/train/cc5 --steps 2000000      # go on from the last checkpoint (or a Ctrl-C)
     crowdnav train --suite crowdnav-classic --decision-every-steps 5 --warm-start dagger --demo-policy mpc-cv
                                                                # a benchmark cell's env, a decision every 0.25 s
+    crowdnav train --constraint collision=1,group_intrusion=1 --cost-budget 0.5 --out out/train/cc5-lag
+                                                               # constrained PPO (PPO-Lagrangian, envs.rl.lagrangian)
 
 It reads top to bottom: the settings (`TrainConfig`), the vectorised envs, the SB3 PPO model with the
 set-aware extractor (`envs.rl.extractor`), an optional warm start by behaviour cloning of the MPC
 (`envs.rl.imitation`), then `learn` with one callback (`envs.rl.monitor`) that prints steps/s and an ETA,
 evaluates the deterministic agent with the harness metrics every `eval_every_steps` on seeds it never trained
 on, and saves checkpoints atomically. Out folder: config.json, progress.csv + tb/ (SB3's logger: CSV and
-TensorBoard), eval.csv, demos.npz, checkpoints/{latest,best}.zip (+ state.json), final.zip.
+TensorBoard), eval.csv, demos.npz, checkpoints/{latest,best}.zip (+ state.json), final.zip. With --constraint the
+model is PPO-Lagrangian (`envs.rl.lagrangian`): the mean episode cost (`envs.rl.cost`) kept within --cost-budget by
+a multiplier, which progress.csv logs and state.json keeps for --resume.
 
 The env is either built from --scenario/--pedestrians/--invisible/--time-limit-s, or is a simulated cell of a
 benchmark suite (--suite, --cell; `envs.rl.setting`): the cell's env config (crowd model, robot, dt, time limit)
@@ -46,7 +50,8 @@ from typing import Any
 from crowdsim.distributed import BACKENDS
 from crowdsim.scenarios import scenario_label
 from envs.atomic import write_json_atomic
-from envs.rl.config import QUICK, SCENARIO_DEFAULTS, TrainConfig
+from envs.rl.config import LAGRANGE_FIELDS, QUICK, SCENARIO_DEFAULTS, TrainConfig, term_weights
+from envs.rl.cost import add_constraint_arguments, wrap_for_cost
 from envs.rl.setting import TRAIN_SEED_OFFSET, add_setting_arguments
 
 
@@ -69,6 +74,10 @@ def make_vec_env(cfg: TrainConfig) -> Any:
     kwargs = {"start_method": "forkserver"} if cfg.workers > 1 else None
     wrapper = {"wrapper_class": DecisionPeriod, "wrapper_kwargs": {"every": cfg.decision_every_steps}} \
         if cfg.decision_every_steps > 1 else {}
+    if cfg.constraint:  # each env step's cost into the info, inside the decision period (`envs.rl.cost`)
+        wrapper = {"wrapper_class": wrap_for_cost,
+                   "wrapper_kwargs": {"weights": dict(cfg.constraint), "dt_s": cfg.env_config().dt_s,
+                                      "every": cfg.decision_every_steps}}
     return sb3_make_vec_env(env_cls, n_envs=cfg.envs, seed=TRAIN_SEED_OFFSET + cfg.seed, vec_env_cls=vec_cls,
                             env_kwargs=env_kwargs, vec_env_kwargs=kwargs, **wrapper)
 
@@ -88,10 +97,15 @@ def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
     policy_kwargs = {"features_extractor_class": CrowdAttentionExtractor,
                      "features_extractor_kwargs": {"use_groups": cfg.groups, "use_predictions": cfg.predictions},
                      "net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": cfg.log_std_init}
-    model = PPO("MultiInputPolicy", vec_env, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+    algo, constrained = PPO, {}
+    if cfg.constraint:  # PPO-Lagrangian: PPO with a cost critic and a multiplier (`envs.rl.lagrangian`)
+        from envs.rl.lagrangian import PPOLagrangian
+
+        algo, constrained = PPOLagrangian, {k: getattr(cfg, k) for k in LAGRANGE_FIELDS}
+    model = algo("MultiInputPolicy", vec_env, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                 learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
                 ent_coef=cfg.ent_coef, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs, seed=cfg.seed,
-                device="cpu", verbose=0)
+                device="cpu", verbose=0, **constrained)
     vec_env.seed(TRAIN_SEED_OFFSET + cfg.seed)  # PPO(seed=) re-seeded the envs' next resets with seed + i
     return model
 
@@ -327,6 +341,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reward", action="append", default=None, metavar="TERM=WEIGHT",
                    help="reward weight override (repeatable): progress, success, collision, discomfort, "
                         "group_intrusion, time")
+    add_constraint_arguments(p, defaults)
 
 
 def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]:
@@ -344,21 +359,19 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
             data = tomllib.loads(args.config.read_text())
         except (OSError, tomllib.TOMLDecodeError) as exc:
             raise ValueError(f"--config {args.config}: {exc}") from exc
-    fields = {f.name for f in dataclasses.fields(TrainConfig)} - {"rewards"}
+    fields = {f.name for f in dataclasses.fields(TrainConfig)} - {"rewards", "constraint"}
     given = {k: v for k, v in vars(args).items() if k in fields}
-    if args.resume is not None and (set(given) - {"total_steps"} or getattr(args, "quick", False)):
-        raise ValueError(f"--resume keeps the run's settings; only --steps may change (got {sorted(given)})")
+    tables = {"rewards": args.reward, "constraint": getattr(args, "constraint", None)}  # TERM=WEIGHT flags
+    if args.resume is not None and (set(given) - {"total_steps"} or getattr(args, "quick", False)
+                                    or any(tables.values())):
+        raise ValueError(f"--resume keeps the run's settings; only --steps may change (got "
+                         f"{sorted(given) + [k for k, v in tables.items() if v]})")
     if getattr(args, "quick", False):
         data.update(QUICK)
     data.update(given)
-    if args.reward:
-        rewards = dict(data.get("rewards", {}))
-        for item in args.reward:
-            key, sep, value = item.partition("=")
-            if not sep:
-                raise ValueError(f"--reward {item!r}: expected TERM=WEIGHT")
-            rewards[key] = float(value)
-        data["rewards"] = rewards
+    for key, items in tables.items():
+        if items:
+            data[key] = {**dict(data.get(key, {})), **term_weights(key, items)}
     cfg = TrainConfig.from_json(data)
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address needs --backend ray")

@@ -1,0 +1,110 @@
+"""The cost that constrained training (`crowdnav train --constraint`, `envs.rl.lagrangian`) keeps under a budget.
+
+Terms of one env step, unweighted, read from the env's step info (`envs.env.CrowdNavEnv.step`):
+- collision: 1 on the step the robot touches a pedestrian or a wall (the episode ends there; the info's
+  `episode_metrics["collision"]`, whatever the collision reward's weight), else 0;
+- group_intrusion: dt_s (s) when the robot's body overlaps a ground-truth group's region (the info's `intruding`),
+  else 0.
+
+An env step costs sum_k weight_k x term_k (weights >= 0: `check_constraint`); an agent decision held for k env steps
+(`envs.rl.setting.DecisionPeriod`) costs the sum over its steps. `ConstraintCost`, a wrapper inside DecisionPeriod,
+writes the episode's cost so far into `info["episode_cost"]`; the learner takes a decision's cost as the increase
+since that env's previous decision (`decision_costs`), and an episode's cost J as the value at its last step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+CONSTRAINT_TERMS = ("collision", "group_intrusion")
+EPISODE_COST_KEY = "episode_cost"  # in the step info: the weighted cost since the episode's reset
+
+
+def check_constraint(weights: Iterable[tuple[str, float]]) -> dict[str, float]:
+    """{term: weight} of (term, weight) pairs; ValueError naming the valid terms for an unknown one, and for a
+    weight that is not a finite number >= 0."""
+    out: dict[str, float] = {}
+    for name, weight in weights:
+        if name not in CONSTRAINT_TERMS:
+            raise ValueError(f"unknown constraint term {name!r}; valid: {', '.join(CONSTRAINT_TERMS)}")
+        if isinstance(weight, bool) or not isinstance(weight, int | float) or not math.isfinite(weight) or weight < 0:
+            raise ValueError(f"constraint weight of {name} must be a finite number >= 0, got {weight!r}")
+        out[name] = float(weight)
+    return out
+
+
+def step_terms(info: dict[str, Any], dt_s: float) -> dict[str, float]:
+    """The unweighted cost terms of one env step from its info (module docstring); dt_s: the env's step, s."""
+    metrics = info.get("episode_metrics") or {}
+    return {"collision": float(bool(metrics.get("collision", False))),
+            "group_intrusion": dt_s * float(bool(info["intruding"]))}
+
+
+class ConstraintCost(gym.Wrapper):
+    """Adds `info["episode_cost"]`: the weighted cost (`step_terms`) summed since the last reset, this step
+    included (0.0 in the reset's info). `weights`: {term: weight}; dt_s: the env's time step (s)."""
+
+    def __init__(self, env: gym.Env, weights: dict[str, float], dt_s: float) -> None:
+        super().__init__(env)
+        self.weights, self.dt_s = check_constraint(weights.items()), float(dt_s)
+        self.total = 0.0
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict]:
+        obs, info = self.env.reset(**kwargs)
+        self.total = 0.0
+        info[EPISODE_COST_KEY] = 0.0
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        terms = step_terms(info, self.dt_s)
+        self.total += sum(w * terms[k] for k, w in self.weights.items())
+        info[EPISODE_COST_KEY] = self.total
+        return obs, reward, terminated, truncated, info
+
+
+def wrap_for_cost(env: gym.Env, weights: dict[str, float], dt_s: float, every: int = 1) -> gym.Env:
+    """`env` with `ConstraintCost`, then deciding every `every` env steps (`DecisionPeriod`, for every > 1): the
+    `wrapper_class` of a constrained run's vectorised envs."""
+    from envs.rl.setting import DecisionPeriod
+
+    env = ConstraintCost(env, weights, dt_s)
+    return DecisionPeriod(env, every) if every > 1 else env
+
+
+def episode_costs_of(infos: list[dict[str, Any]]) -> np.ndarray:
+    """(n_envs,) `info["episode_cost"]` of a vectorised step's infos; ValueError when the envs do not report it."""
+    try:
+        return np.array([float(info[EPISODE_COST_KEY]) for info in infos])
+    except KeyError:
+        raise ValueError("constrained PPO needs envs wrapped in envs.rl.cost.ConstraintCost (no info['episode_cost'])"
+                         ) from None
+
+
+def decision_costs(totals: np.ndarray, previous: np.ndarray, episode_starts: np.ndarray) -> np.ndarray:
+    """(n_envs,) cost of each env's last decision: its episode cost now (`totals`) minus at its previous decision
+    (`previous`), or all of it where the decision began an episode (`episode_starts`: the env had just reset)."""
+    return totals - np.where(np.asarray(episode_starts, bool), 0.0, previous)
+
+
+def add_constraint_arguments(p: argparse.ArgumentParser, defaults: Any) -> None:
+    """`crowdnav train`'s --constraint, --cost-budget, --lambda-lr and --lambda-init (TrainConfig fields;
+    `defaults`: a default TrainConfig, for the help)."""
+    p.add_argument("--constraint", action="append", default=None, metavar="TERM=WEIGHT[,TERM=WEIGHT]",
+                   help="train constrained PPO (PPO-Lagrangian, docs/rl.md), keeping the mean episode cost within "
+                        "--cost-budget; cost terms (repeatable or comma-separated): collision (1 per collision), "
+                        "group_intrusion (seconds inside a group) (default: none, plain PPO)")
+    flags = {"cost_budget": "constrained PPO: the mean episode cost allowed (collisions + intrusion seconds per "
+                            "episode, each times its --constraint weight)",
+             "lambda_lr": "constrained PPO: the multiplier's step after each rollout, lambda += lr x (episode cost "
+                          "- budget), floored at 0",
+             "lambda_init": "constrained PPO: the multiplier at the start (>= 0)"}
+    for name, text in flags.items():
+        p.add_argument("--" + name.replace("_", "-"), type=float, default=argparse.SUPPRESS, dest=name,
+                       help=f"{text} (default: {getattr(defaults, name)})")
