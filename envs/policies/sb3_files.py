@@ -189,6 +189,30 @@ def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
         raise ValueError(f"{path}: cannot load its weights ({str(exc).splitlines()[0]})") from exc
 
 
+def load_policy_weights(model: Any, path: Path, config: CrowdNavConfig, every: int) -> list[str]:
+    """The policy weights of the agent in `path` into `model`'s policy (`weights_only`), to start training from them;
+    the optimiser starts afresh. The observation layout and the decision period `every` must be the agent's, and every
+    saved weight must fit; weights `model` has and the agent lacks (a constrained PPO's cost critic) keep their
+    initial values and are returned by name. ValueError otherwise."""
+    import io
+
+    import torch
+
+    _, layout = check_layout(path, config)
+    if decision_period(layout) != every:
+        raise ValueError(f"{path}: the agent decides every {decision_period(layout)} env steps, this run every {every}")
+    try:
+        with zipfile.ZipFile(path) as z:
+            state = torch.load(io.BytesIO(z.read("policy.pth")), map_location="cpu", weights_only=True)
+        missing, unexpected = model.policy.load_state_dict(state, strict=False)
+    except LOAD_ERRORS as exc:
+        raise ValueError(f"{path}: cannot load its policy weights ({str(exc).splitlines()[0]})") from exc
+    foreign = [k for k in missing if not k.startswith("cost_net.")]
+    if unexpected or foreign:
+        raise ValueError(f"{path}: its policy does not fit this run's (missing {foreign}, unexpected {unexpected})")
+    return list(missing)
+
+
 def save_agent(model: Any, path: Path, config: CrowdNavConfig, meta: dict[str, Any] | None = None) -> None:
     """Save atomically (a reader sees the old file or the complete new one) with `crowdnav.json` inside."""
     layout: dict[str, Any] = {"signature": signature(config), "meta": meta or {}}

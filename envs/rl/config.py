@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from envs.config import CrowdNavConfig, ObservationConfig, RewardWeights
@@ -61,6 +62,7 @@ class TrainConfig:
     log_std_init: float = -0.5
     warm_start: str = "none"          # "bc": behaviour cloning of demo_policy before PPO; "dagger": then DAgger
     demo_policy: str = "mpc-gpgraph"
+    init_from: str = ""               # start from this agent's policy (a packaged agent's name or an SB3 .zip); "": new
     demo_episodes: int = 60
     demo_seed: int = 200_000
     demo_successes_only: bool = False  # keep only the demonstrations the expert succeeded in (not DAgger's labels)
@@ -91,6 +93,11 @@ class TrainConfig:
                 raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
+        if self.init_from:
+            if self.warm_start != "none":
+                raise ValueError(f"init_from {self.init_from!r} starts from an agent; drop warm_start "
+                                 f"{self.warm_start}")
+            self.init_path()  # names an agent that exists
         if self.workers not in (1, self.envs):
             raise ValueError(f"workers must be 1 (all envs in this process) or equal to envs ({self.envs}: one "
                              f"subprocess per env, SB3's SubprocVecEnv), got {self.workers}")
@@ -162,6 +169,22 @@ class TrainConfig:
         return {"training seeds (10000000 + seed)": range(first, first + self.envs),
                 "eval_seed": range(self.eval_seed, self.eval_seed + self.eval_episodes),
                 "demo_seed": range(self.demo_seed, self.demo_seed + demos)}
+
+    def init_path(self) -> Path:
+        """The agent file `init_from` names: a path ending in .zip, else a packaged agent
+        (`envs.policies.AGENTS_DIR`); ValueError naming the packaged agents when there is none."""
+        from crowdsim.names import unknown_name
+        from envs.policies import AGENTS_DIR
+
+        if self.init_from.endswith(".zip"):
+            path = Path(self.init_from)
+            if not path.is_file():
+                raise ValueError(f"init_from: no such agent file {path}")
+            return path
+        packaged = sorted(p.stem for p in AGENTS_DIR.glob("*.zip"))
+        if self.init_from not in packaged:
+            raise ValueError(unknown_name("agent", self.init_from, packaged, "packaged agents (or an SB3 .zip)"))
+        return AGENTS_DIR / f"{self.init_from}.zip"
 
     @property
     def env_cell(self) -> str:

@@ -225,6 +225,11 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
             (out / "eval.csv").unlink(missing_ok=True)  # a run stopped before its first checkpoint starts again
             if cfg.warm_start != "none":
                 monitor.note_warm_start(warm_start(cfg, model, out, demos_path, backend, address))
+            if cfg.init_from:
+                from envs.policies.sb3_files import load_policy_weights
+
+                fresh = load_policy_weights(model, cfg.init_path(), cfg.env_config(), cfg.decision_every_steps)
+                print(f"starting from {cfg.init_path()}" + (f" (new: {', '.join(fresh)})" if fresh else ""), flush=True)
             monitor.evaluate(model)  # the curve starts at step 0 (the cloned or the random policy): the baseline
             monitor.checkpoint(model)  # resumable from here on
         monitor.safe_steps = model.num_timesteps
@@ -276,6 +281,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "target_kl": (float, "stop an update's epochs once the approximate KL passes 1.5x this (unset: never)"),
     "log_std_init": (float, "initial log standard deviation of the Gaussian actions (also set after cloning)"),
     "warm_start": (str, "none | bc (clone --demo-policy before PPO) | dagger (then --dagger-rounds of DAgger)"),
+    "init_from": (str, "start from this agent's policy: a packaged agent (e.g. ppo-crowdnav-20) or an SB3 .zip with "
+                       "this run's observation and decision period; the optimiser starts afresh (no warm start)"),
     "demo_policy": (str, "the registry policy that demonstrates and labels (e.g. mpc-cv; a suite's planner "
                          "defaults apply)"),
     "demo_episodes": (int, "demonstration episodes for cloning (seeds --demo-seed onwards)"),

@@ -1,0 +1,67 @@
+"""`crowdnav train --init-from AGENT`: a run that starts from a trained agent's policy (e.g. to fine-tune a shipped
+agent under a constraint), loaded without unpickling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from envs.policies import AGENTS_DIR  # noqa: E402
+from envs.policies.sb3_files import load_agent, load_policy_weights  # noqa: E402
+from envs.rl.config import TrainConfig  # noqa: E402
+from envs.rl.train import main, make_model, make_vec_env  # noqa: E402
+
+AGENT = "ppo-crowdnav-20"  # trained in crowdnav-plusplus, a decision every 5 env steps
+
+
+def _cfg(**kw) -> TrainConfig:
+    return TrainConfig(suite="crowdnav-plusplus", decision_every_steps=5, envs=1, init_from=AGENT, **kw)
+
+
+@pytest.mark.parametrize("constraint", [(), (("collision", 1.0),)])
+def test_the_run_starts_with_the_agents_actions(constraint):
+    cfg = _cfg(constraint=constraint, cost_budget=0.02 if constraint else None)
+    vec = make_vec_env(cfg)
+    try:
+        model = make_model(cfg, vec)
+        obs = vec.reset()
+        before, _ = model.predict(obs, deterministic=True)
+        fresh = load_policy_weights(model, cfg.init_path(), cfg.env_config(), cfg.decision_every_steps)
+        after, _ = model.predict(obs, deterministic=True)
+        agent = load_agent(AGENTS_DIR / f"{AGENT}.zip", "PPO", vec.envs[0].unwrapped)
+        want, _ = agent.predict(obs, deterministic=True)
+    finally:
+        vec.close()
+    assert np.array_equal(after, want) and not np.array_equal(before, want)
+    assert bool(fresh) == bool(constraint) and all(k.startswith("cost_net.") for k in fresh)
+
+
+def test_another_decision_period_or_layout_is_refused():
+    cfg = TrainConfig(suite="crowdnav-plusplus", decision_every_steps=1, envs=1)
+    vec = make_vec_env(cfg)
+    try:
+        with pytest.raises(ValueError, match="decides every 5 env steps"):
+            load_policy_weights(make_model(cfg, vec), AGENTS_DIR / f"{AGENT}.zip", cfg.env_config(), 1)
+    finally:
+        vec.close()
+    wide = TrainConfig(suite="crowdnav-plusplus", decision_every_steps=5, envs=1, max_pedestrians=10)
+    vec = make_vec_env(wide)
+    try:
+        with pytest.raises(ValueError, match="another observation layout"):
+            load_policy_weights(make_model(wide, vec), AGENTS_DIR / f"{AGENT}.zip", wide.env_config(), 5)
+    finally:
+        vec.close()
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--init-from", "ppo-crowdnav-2"], "did you mean 'ppo-crowdnav-20'"),
+    (["--init-from", "nope.zip"], "no such agent file"),
+    (["--init-from", AGENT, "--warm-start", "bc"], "drop warm_start"),
+])
+def test_init_from_misuse_is_one_line_and_writes_nothing(args, says, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["--suite", "crowdnav-plusplus", "--decision-every-steps", "5", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and len(err.splitlines()) == 1 and not out.exists()
