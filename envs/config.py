@@ -16,6 +16,9 @@ from envs.timing import DEFAULT_TIMING
 from planner import RobotConfig
 
 GROUP_SOURCES = ("truth", "predicted")
+# Where the observed predictions come from: "predictor" (`ObservationConfig.predictor`) or "oracle" (the true future
+# of the people observed, privileged: an upper bound for an agent reading predictions).
+PREDICTION_SOURCES = ("predictor", "oracle")
 # The predictor mpc-gpgraph uses and the observation's predictions come from, unless one is named: the shipped
 # crowdsim-trained GP-Graph (RESULTS.md, "Default synthetic predictor") grouping people by the coherent-motion rule
 # (predictor.group_rules) instead of its learned assigner, which does not transfer to real people: on the UCY group
@@ -87,9 +90,17 @@ class ObservationConfig:
     position_bound_m: Box bound on every relative position; values are clipped to it, m.
     speed_bound_mps: Box bound on velocities, m/s.
     group_source: "truth" (the simulator's labels) or "predicted" (the predictor's assignment).
-    predictions: include the predictor's sampled futures (K, 12, P, 2) in the observation.
+    predictions: include the predicted futures (K, 12, P, 2) in the observation.
     n_prediction_samples: K in the observation.
-    predictor: predictor name or checkpoint path, used only for predicted groups or predictions.
+    predictor: predictor name or checkpoint path, used only for predicted groups or predictions (source "predictor").
+    prediction_source: where predictions and predicted groups come from (`PREDICTION_SOURCES`): "predictor" (default,
+        `predictor`'s samples) or "oracle": the true future of the people observed (`Crowd.future`; one sample, seen
+        as K copies, a person leaving within 4.8 s held where last seen) and their true groups, an upper bound.
+    prediction_calibration: with predictions, also observe how wrong they have been so far in the episode
+        (`envs.calibration`): per person, the conformal (1 - calibration_alpha) quantile of each step's displacement
+        errors (`prediction_error`, (P, 12) m) and how many step-1 errors it rests on (`prediction_error_count`).
+    calibration_alpha: the miscoverage level of that quantile, in (0, 1).
+    calibration_window: the errors kept per person and step (the last ones), >= 1.
     wall_rays: R range rays around the robot (0: no `walls` key); ray k points 360 k / R degrees left of the
         robot's heading (holonomic: of +x).
     wall_range_m: a ray that meets no wall within this range reads it, m.
@@ -106,6 +117,10 @@ class ObservationConfig:
     predictions: bool = False
     n_prediction_samples: int = 3
     predictor: str = DEFAULT_PREDICTOR
+    prediction_source: str = "predictor"
+    prediction_calibration: bool = False
+    calibration_alpha: float = 0.1
+    calibration_window: int = 20
     wall_rays: int = 0
     wall_range_m: float = 5.0
 
@@ -125,9 +140,25 @@ class ObservationConfig:
             raise ValueError(f"occlusion must be a bool, got {self.occlusion!r}")
         if self.group_source not in GROUP_SOURCES:
             raise ValueError(f"unknown group_source {self.group_source!r}; valid: {', '.join(GROUP_SOURCES)}")
+        self._check_prediction_settings()
+
+    def _check_prediction_settings(self) -> None:
+        if self.prediction_source not in PREDICTION_SOURCES:
+            raise ValueError(unknown_name("prediction_source", self.prediction_source, PREDICTION_SOURCES))
+        if not isinstance(self.prediction_calibration, bool):
+            raise ValueError(f"prediction_calibration must be a bool, got {self.prediction_calibration!r}")
+        if self.prediction_calibration and not self.predictions:
+            raise ValueError("prediction_calibration (crowdnav train --calibration) calibrates the observed "
+                             "predictions: it needs predictions=True (--predictions)")
+        if isinstance(self.calibration_alpha, bool) or not (isinstance(self.calibration_alpha, int | float)
+                                                            and 0 < self.calibration_alpha < 1):
+            raise ValueError(f"calibration_alpha must be a number in (0, 1), got {self.calibration_alpha!r}")
+        if not isinstance(self.calibration_window, int) or self.calibration_window < 1:
+            raise ValueError(f"calibration_window must be an integer >= 1, got {self.calibration_window!r}")
 
     @property
     def needs_predictor(self) -> bool:
+        """Whether predictions or predicted groups are observed (from the predictor, or the oracle's truth)."""
         return self.predictions or self.group_source == "predicted"
 
     @property

@@ -24,13 +24,14 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdsim import CrowdState
+from envs.calibration import episode_calibration
 from envs.config import CrowdNavConfig
 from envs.crowds.models import make_crowd
 from envs.drawing.frame import SceneFrame
 from envs.history import TRACK_ROWS, PedHistory
 from envs.observation import build_observation, observation_space
 from envs.perception import perceived, sensor_heading
-from envs.prediction import load_predictor_spec, predict
+from envs.prediction import load_predictor_spec, oracle_prediction, predict
 from envs.rewards import StepFacts, reward_terms, weighted
 from envs.scoring.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.scoring.geometry import WallIndex
@@ -90,6 +91,7 @@ class CrowdNavEnv(gym.Env):
         self._annotations: dict[str, np.ndarray | None] = {}
         self._pred_samples: np.ndarray | None = None
         self._pred_groups: np.ndarray | None = None
+        self._calib = None  # the episode's `envs.calibration.PredictionCalibration` (with prediction_calibration)
         self._walls = WallIndex(self.crowd.walls)  # the walls never change: precomputed for the per-step check
         self._peds_cache: tuple[CrowdState | None, Pedestrians | None] = (None, None)
         self._limited = self.config.observation.limited_view  # fov_deg < 360 or occlusion (`envs.perception`)
@@ -139,6 +141,7 @@ class CrowdNavEnv(gym.Env):
         self._spawns.reset()
         self._done = False
         self._annotations = {}
+        self._calib = episode_calibration(cfg.observation, self.timing.pred_len)
         self._update_prediction()
         self._obs = self._observe()
         return self._obs, {"goal_distance_m": self._goal_distance()}
@@ -392,15 +395,22 @@ class CrowdNavEnv(gym.Env):
     def _update_prediction(self) -> None:
         if not self.config.observation.needs_predictor:
             return
-        if self._predictor is None:  # torch is loaded only when predictions are observed
-            self._predictor = load_predictor_spec(self.config.observation.predictor, threads=None, timing=self.timing)
-        k = self.config.observation.n_prediction_samples
         p = self._remembered_people()
-        window = self.history_window(p)
-        track = self.track_window(p, window) if getattr(self._predictor, "reads_track", False) else None
-        self._pred_samples, self._pred_groups = predict(self._predictor, window, k, self._pred_rng,
-                                                        self.timing.pred_len, track)
+        if self.config.observation.prediction_source == "oracle":  # the true future: an upper bound
+            self._pred_samples, self._pred_groups = oracle_prediction(self.crowd, p, self.timing)
+        else:
+            if self._predictor is None:  # torch is loaded only when predictions are observed
+                self._predictor = load_predictor_spec(self.config.observation.predictor, threads=None,
+                                                      timing=self.timing)
+            window = self.history_window(p)
+            track = self.track_window(p, window) if getattr(self._predictor, "reads_track", False) else None
+            self._pred_samples, self._pred_groups = predict(self._predictor, window,
+                                                            self.config.observation.n_prediction_samples,
+                                                            self._pred_rng, self.timing.pred_len, track)
         self._pred_ids = p.ped_id if self._limited else None
+        if self._calib is not None:  # scores the predictions whose time has come, keeps these
+            self._calib.update(self._sim_steps // self.config.ticks_per_prediction_step, p.ped_id, p.pos,
+                               self._pred_samples)
 
     def _remembered_people(self) -> Pedestrians:
         """Whom the history holds now: `pedestrians()`, or with a limited view `perceived_pedestrians()`."""
@@ -457,8 +467,9 @@ class CrowdNavEnv(gym.Env):
                 p, groups = self._rows(p, keep), groups[keep]  # the mask once, for the rows and their groups
                 samples = None if samples is None else samples[:, :, keep]
         time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
+        calib = None if self._calib is None else self._calib.features(p.ped_id)
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
-                                 p.pos, p.vel, p.radius, groups, samples, self._walls.segments)
+                                 p.pos, p.vel, p.radius, groups, samples, self._walls.segments, calib)
 
     def _perceived_predictions(self, p: Pedestrians) -> tuple[Pedestrians, np.ndarray, np.ndarray | None]:
         """With a limited view: the perceived rows of `p` (all pedestrians now), their groups and their predicted

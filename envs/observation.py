@@ -10,7 +10,13 @@ Keys (P = max_pedestrians, K = n_prediction_samples):
     group_ids (P,): group ids renumbered 0..G-1 in order of first appearance among the rows (truth or
         predicted, by config); -1 for padding.
     predictions (K, 12, P, 2), only if configured: sampled futures at +0.4 ... +4.8 s relative to the
-        robot, in the robot frame, m; padding rows are 0.
+        robot, in the robot frame, m; padding rows are 0. With `prediction_source` "oracle": the true future (K copies).
+    prediction_error (P, 12), only with `prediction_calibration`: per row, how wrong this person's predictions have
+        been so far in the episode at each step +0.4 ... +4.8 s: the conformal (1 - calibration_alpha) quantile of the
+        displacement errors (to the nearest sample) of the predictions whose time has come, m (`envs.calibration`;
+        0 where none has, and for padding rows).
+    prediction_error_count (P,), only with `prediction_calibration`: how many step-1 (+0.4 s) errors that rests on,
+        0..calibration_window (0 for padding rows).
     walls (R,), only if `wall_rays` > 0: range readings to the scene's walls, ray k at 360 k / R degrees left of
         the heading (holonomic: of +x), m, wall_range_m where no wall is within range.
 Every value is clipped to its Box, so nothing is ever out of bounds.
@@ -21,7 +27,8 @@ fields, and the layout signature a trained agent is checked against (`signature`
 Gymnasium's `Dict` space sorts its keys, and `gymnasium.spaces.flatten` (and SB3's `MultiInputPolicy`, which
 concatenates the keys in the same order) lays them out one after the other, each in C order:
 
-    group_ids (P,) | pedestrian_mask (P,) | pedestrians (P, 5) | predictions (K, 12, P, 2), if observed | robot (7,)
+    group_ids (P,) | pedestrian_mask (P,) | pedestrians (P, 5) | prediction_error (P, 12), if observed
+    | prediction_error_count (P,), if observed | predictions (K, 12, P, 2), if observed | robot (7,)
 
 and, with `wall_rays` R > 0, `walls` (R,) last. With the defaults (P = 20, no predictions, no wall rays) that is
 20 + 20 + 100 + 7 = 147 values: group_ids 0-19,
@@ -61,6 +68,9 @@ def observation_space(cfg: CrowdNavConfig) -> spaces.Dict:
     }
     if obs.predictions:
         items["predictions"] = spaces.Box(-pb, pb, (obs.n_prediction_samples, PRED_LEN, p, 2), np.float32)
+    if obs.prediction_calibration:
+        items["prediction_error"] = spaces.Box(0.0, pb, (p, PRED_LEN), np.float32)
+        items["prediction_error_count"] = spaces.Box(0.0, float(obs.calibration_window), (p,), np.float32)
     if obs.wall_rays:
         items["walls"] = spaces.Box(0.0, obs.wall_range_m, (obs.wall_rays,), np.float32)
     return spaces.Dict(items)
@@ -83,11 +93,13 @@ def _bounds(space: spaces.Dict) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.ndarray, goal: np.ndarray,
                       time_left: float, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray,
-                      group_id: np.ndarray, samples: np.ndarray | None,
-                      walls: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                      group_id: np.ndarray, samples: np.ndarray | None, walls: np.ndarray | None = None,
+                      calibration: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """The observation dict from the robot state (state_dim,), goal (2,), time left as a fraction, the
-    pedestrians pos/vel (n, 2), radius (n,), group ids (n,), predicted samples (K, 12, n, 2) or None, and
-    the wall segments (S, 2, 2) m (read only when the space has `walls`)."""
+    pedestrians pos/vel (n, 2), radius (n,), group ids (n,), predicted samples (K, 12, n, 2) or None, the wall
+    segments (S, 2, 2) m (read only when the space has `walls`) and the pedestrians' calibration, quantiles (n, 12) m
+    and counts (n,) (`envs.calibration.PredictionCalibration.features`; read only when the space has
+    `prediction_error`)."""
     p = cfg.observation.max_pedestrians
     unicycle = cfg.robot.model == "unicycle"
     rot = rotation(float(robot_state[2])) if unicycle else np.eye(2)
@@ -104,6 +116,8 @@ def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.n
         if samples is not None and n:
             pred[:, :, :n] = (samples[:k, :, rows] - here) @ rot.T
         out["predictions"] = np.clip(pred, *bounds["predictions"]).astype(np.float32)
+    if "prediction_error" in space.spaces:
+        out.update(_calibration_rows(p, rows, calibration, bounds))
     if "walls" in space.spaces:
         r = cfg.observation.wall_rays
         heading = float(robot_state[2]) if unicycle else 0.0
@@ -111,6 +125,17 @@ def build_observation(cfg: CrowdNavConfig, space: spaces.Dict, robot_state: np.n
         rays = ray_distances(here, heading + 2.0 * np.pi * np.arange(r) / r, segs, cfg.observation.wall_range_m)
         out["walls"] = np.clip(rays, *bounds["walls"]).astype(np.float32)
     return out
+
+
+def _calibration_rows(p: int, rows: np.ndarray, calibration: tuple[np.ndarray, np.ndarray] | None,
+                      bounds: dict[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, np.ndarray]:
+    """`prediction_error` (p, 12) and `prediction_error_count` (p,) of the observed rows (indices into the
+    calibration's people), padding rows 0, clipped to their Boxes."""
+    err, count = np.zeros((p, PRED_LEN), np.float32), np.zeros(p, np.float32)
+    if calibration is not None and len(rows):  # errors and counts are >= 0: only the upper bounds can clip
+        err[:len(rows)] = np.minimum(calibration[0][rows], bounds["prediction_error"][1][0, 0])
+        count[:len(rows)] = np.minimum(calibration[1][rows], bounds["prediction_error_count"][1][0])
+    return {"prediction_error": err, "prediction_error_count": count}
 
 
 PED_FIELDS = ("x_m", "y_m", "vx_mps", "vy_mps", "radius_m")
@@ -161,6 +186,8 @@ def field_names(config: CrowdNavConfig) -> list[str]:
             k, t, p, _ = b.shape
             names += [f"predictions[{s}][t={j}][{i}].{c}_m" for s in range(k) for j in range(t) for i in range(p)
                       for c in "xy"]
+        elif b.key == "prediction_error":
+            names += [f"prediction_error[{i}][t={j}].quantile_m" for i in range(b.shape[0]) for j in range(b.shape[1])]
         else:
             names += [f"{b.key}[{i}]" for i in range(b.shape[0])]
     return names
@@ -182,7 +209,9 @@ def layout_table(config: CrowdNavConfig) -> str:
     rows = ["| key | flat indices | shape | fields |", "|---|---|---|---|"]
     per_key = {"robot": ", ".join(ROBOT_FIELDS[config.robot.model]), "pedestrians": ", ".join(PED_FIELDS),
                "pedestrian_mask": "1 real row, 0 padding", "group_ids": "0..G-1 by first appearance, -1 padding",
-               "predictions": "x_m, y_m (robot frame)", "walls": "range_m of ray k at 360 k / R deg"}
+               "predictions": "x_m, y_m (robot frame)", "walls": "range_m of ray k at 360 k / R deg",
+               "prediction_error": "quantile_m of step t (t = 0..11: +0.4 ... +4.8 s)",
+               "prediction_error_count": "step-1 errors behind the row's quantiles"}
     for b in blocks(config):
         rows.append(f"| {b.key} | {b.start}-{b.stop - 1} | {b.shape} | {per_key[b.key]} |")
     return "\n".join(rows)
@@ -190,16 +219,21 @@ def layout_table(config: CrowdNavConfig) -> str:
 
 def signature(config: CrowdNavConfig) -> dict[str, Any]:
     """What a trained agent depends on: the keys and their shapes, the robot model and P (JSON-ready)."""
-    return {"keys": {b.key: list(b.shape) for b in blocks(config)}, "robot_model": config.robot.model,
-            "max_pedestrians": config.observation.max_pedestrians,
-            "group_source": config.observation.group_source}
+    obs = config.observation
+    out = {"keys": {b.key: list(b.shape) for b in blocks(config)}, "robot_model": config.robot.model,
+           "max_pedestrians": obs.max_pedestrians, "group_source": obs.group_source}
+    if obs.predictions:  # what the observed predictions mean (absent without them, as in agents saved before)
+        out["prediction_source"] = obs.prediction_source
+    if obs.prediction_calibration:
+        out["calibration_alpha"] = obs.calibration_alpha
+    return out
 
 
 def mismatches(saved: dict[str, Any], current: dict[str, Any]) -> list[str]:
     """Human-readable differences between a saved signature and the env's (empty when they fit)."""
     out = []
-    for name in ("robot_model", "max_pedestrians", "group_source"):
-        if name in saved and saved[name] != current[name]:
+    for name in ("robot_model", "max_pedestrians", "group_source", "prediction_source", "calibration_alpha"):
+        if name in saved and name in current and saved[name] != current[name]:
             out.append(f"{name} {saved[name]!r} (agent) vs {current[name]!r} (env)")
     keys_s, keys_c = saved.get("keys", {}), current["keys"]
     for key in sorted(set(keys_s) | set(keys_c)):

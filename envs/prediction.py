@@ -2,7 +2,7 @@
 
 Both the env (predictions in the observation, `ObservationConfig.predictions`) and the MPC policy (`mpc-gpgraph`)
 load their predictor with `load_predictor_spec` and draw samples with `predict`, each with its own Generator; each
-checks the predictor's timing against the env's (`envs.timing`).
+checks the predictor's timing against the env's (`envs.timing`). `true_future` is the observation's oracle source.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import numpy as np
 from envs.config import DEFAULT_PREDICTOR
 from envs.factories import is_plugin, load_factory
 from envs.timing import PredictionTiming
+from envs.view import Pedestrians
 
 
 def load_predictor_spec(spec: str | None, threads: int | None = 1, timing: PredictionTiming | None = None) -> Any:
@@ -48,3 +49,28 @@ def predict(predictor: Any, history: np.ndarray, n_samples: int, rng: np.random.
     else:
         raise ValueError(f"{type(predictor).__name__} reads no track (no reads_track); give it the history only")
     return pred.samples, pred.group_id
+
+
+
+def oracle_prediction(crowd: Any, p: Pedestrians, timing: PredictionTiming) -> tuple[np.ndarray, np.ndarray]:
+    """The observation's oracle source (`ObservationConfig.prediction_source` "oracle"): the true future of the
+    pedestrians p as one sample (1, pred_len, N, 2) m (`true_future`) and their true group ids (N,)."""
+    return true_future(crowd, p.ped_id, p.pos, timing.step_s, timing.pred_len), p.group_id
+
+
+def true_future(crowd: Any, ped_ids: np.ndarray, pos: np.ndarray, step_s: float,
+                pred_len: int) -> np.ndarray:
+    """The oracle's prediction (`ObservationConfig.prediction_source` "oracle"): where the pedestrians ped_ids (N,),
+    now at pos (N, 2) m, will truly be at +step_s ... +pred_len step_s, as one sample (1, pred_len, N, 2) m
+    (`Crowd.future`, privileged); one who leaves within the horizon is held where last seen. ValueError when the crowd
+    cannot tell its future."""
+    if len(ped_ids) == 0:
+        return np.zeros((1, pred_len, 0, 2))
+    if not hasattr(crowd, "future"):
+        raise ValueError(f"prediction_source 'oracle' needs a crowd that can tell its future; "
+                         f"{type(crowd).__name__} cannot")
+    future = np.concatenate([np.asarray(pos, float)[None], crowd.future(ped_ids, step_s * np.arange(1, pred_len + 1))])
+    for k in range(1, len(future)):  # hold the last known position where a track has ended
+        gone = np.isnan(future[k, :, 0])
+        future[k, gone] = future[k - 1, gone]
+    return future[None, 1:]

@@ -133,7 +133,8 @@ def course_of(config: CrowdNavConfig, seed: int) -> Course:
     if not crowd_is_fixed(config):
         raise ValueError("reachability needs a crowd that ignores the robot (a replay, or robot_visible false); "
                          f"scenario {config.scenario!r} sees the robot")
-    cfg = replace(config, observation=replace(config.observation, predictions=False, group_source="truth"))
+    cfg = replace(config, observation=replace(config.observation, predictions=False, prediction_calibration=False,
+                                              group_source="truth"))
     env = CrowdNavEnv(cfg)
     env.reset(seed=seed)
     crowd, dt = env.crowd, cfg.dt_s

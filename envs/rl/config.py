@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from envs.config import CrowdNavConfig, ObservationConfig, RewardWeights
+from envs.config import DEFAULT_PREDICTOR, CrowdNavConfig, ObservationConfig, RewardWeights
 from envs.rl.setting import TRAIN_SEED_OFFSET, check_disjoint, check_seeds, suite_env_config
 
 if TYPE_CHECKING:
@@ -44,6 +44,10 @@ class TrainConfig:
     max_pedestrians: int = 20         # P rows in the observation
     groups: bool = True               # the extractor pools rows by group id
     predictions: bool = False         # predicted futures in the observation and the extractor
+    prediction_source: str = "predictor"  # "predictor" (the one named below) or "oracle" (the true future)
+    predictor: str = DEFAULT_PREDICTOR  # the observation's predictor (name, checkpoint or module:factory)
+    calibration: bool = False         # the predictions' running conformal calibration in the observation and extractor
+    calibration_alpha: float = 0.1    # its miscoverage level: the (1 - alpha) quantile of the errors, in (0, 1)
     wall_rays: int = 0                # range rays to the walls in the observation (0: none)
     rewards: tuple[tuple[str, float], ...] = ()  # RewardWeights overrides, e.g. (("collision", -20.0),)
     total_steps: int = 1_000_000
@@ -206,9 +210,14 @@ class TrainConfig:
             return None
         from envs.rl.mix import build_mix
 
-        obs = (("max_pedestrians", self.max_pedestrians), ("predictions", self.predictions),
-               ("wall_rays", self.wall_rays))
+        obs = tuple(self.observation_overrides().items())
         return build_mix(self.mix, obs, tuple(sorted(self.reward_overrides().items())))
+
+    def observation_overrides(self) -> dict[str, Any]:
+        """This run's `ObservationConfig` fields (a suite's or a mix's cells keep their other fields)."""
+        return {"max_pedestrians": self.max_pedestrians, "predictions": self.predictions, "wall_rays": self.wall_rays,
+                "prediction_source": self.prediction_source, "predictor": self.predictor,
+                "prediction_calibration": self.calibration, "calibration_alpha": self.calibration_alpha}
 
     def env_config(self) -> CrowdNavConfig:
         """The env every training and evaluation episode runs in: the suite cell's (with this run's observation
@@ -219,12 +228,10 @@ class TrainConfig:
         overrides = self.reward_overrides()
         if self.suite:
             _, cfg = suite_env_config(self.suite, self.cell)
-            obs = replace(cfg.observation, max_pedestrians=self.max_pedestrians, predictions=self.predictions,
-                          wall_rays=self.wall_rays)
+            obs = replace(cfg.observation, **self.observation_overrides())
             return replace(cfg, observation=obs, rewards=replace(cfg.rewards, **overrides))
         weights = replace(RewardWeights(), **overrides)
-        obs = ObservationConfig(max_pedestrians=self.max_pedestrians, predictions=self.predictions,
-                                wall_rays=self.wall_rays)
+        obs = ObservationConfig(**self.observation_overrides())
         return CrowdNavConfig(scenario=self.scenario, n_pedestrians=self.pedestrians,
                               robot_visible=not self.invisible, time_limit_s=self.time_limit_s, rewards=weights,
                               observation=obs)

@@ -95,7 +95,8 @@ def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
     from envs.rl.extractor import CrowdAttentionExtractor
 
     policy_kwargs = {"features_extractor_class": CrowdAttentionExtractor,
-                     "features_extractor_kwargs": {"use_groups": cfg.groups, "use_predictions": cfg.predictions},
+                     "features_extractor_kwargs": {"use_groups": cfg.groups, "use_predictions": cfg.predictions,
+                                                   "use_calibration": cfg.calibration},
                      "net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": cfg.log_std_init}
     algo, constrained = PPO, {}
     if cfg.constraint:  # PPO-Lagrangian: PPO with a cost critic and a multiplier (`envs.rl.lagrangian`)
@@ -266,6 +267,12 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "max_pedestrians": (int, "pedestrian rows P in the observation (the nearest P; the rest unseen)"),
     "wall_rays": (int, "range rays to the walls in the observation (0: none; an agent with rays needs them at "
                        "evaluation)"),
+    "prediction_source": (str, "with --predictions, where they come from: predictor (--predictor's samples) or "
+                               "oracle (the true future of the people observed: an upper bound)"),
+    "predictor": (str, "the observation's predictor with --prediction-source predictor (a name such as "
+                       "constant-velocity, a checkpoint or module:factory)"),
+    "calibration_alpha": (float, "with --calibration: the errors' quantile is the conformal (1 - alpha) one, alpha "
+                                 "in (0, 1)"),
     "total_steps": (int, "agent steps (decisions) to train for, the warm start not counted"),
     "seed": (int, "seed of PPO and of the training episodes (env i first resets with 10000000 + seed + i)"),
     "envs": (int, "parallel envs in each roll-out"),
@@ -307,6 +314,8 @@ BOOL_HELP: dict[str, str] = {
     "groups": "the extractor pools each pedestrian row with its group's rows (group ids in the observation)",
     "predictions": "predicted futures in the observation and the extractor (slower: the predictor runs every "
                    "step)",
+    "calibration": "with --predictions: how wrong each person's predictions have been so far in the episode (the "
+                   "running conformal quantile of each step's errors) in the observation and the extractor",
 }
 
 
