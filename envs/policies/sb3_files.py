@@ -194,17 +194,14 @@ def load_policy_weights(model: Any, path: Path, config: CrowdNavConfig, every: i
     the optimiser starts afresh. The observation layout and the decision period `every` must be the agent's, and every
     saved weight must fit; weights `model` has and the agent lacks (a constrained PPO's cost critic) keep their
     initial values and are returned by name. ValueError otherwise."""
-    import io
-
-    import torch
+    from stable_baselines3.common.save_util import load_from_zip_file
 
     _, layout = check_layout(path, config)
     if decision_period(layout) != every:
         raise ValueError(f"{path}: the agent decides every {decision_period(layout)} env steps, this run every {every}")
-    try:
-        with zipfile.ZipFile(path) as z:
-            state = torch.load(io.BytesIO(z.read("policy.pth")), map_location="cpu", weights_only=True)
-        missing, unexpected = model.policy.load_state_dict(state, strict=False)
+    try:  # SB3's reader: torch.load(weights_only=True) of each .pth entry, the "data" entry not read
+        _, params, _ = load_from_zip_file(path, load_data=False, device="cpu")
+        missing, unexpected = model.policy.load_state_dict(params["policy"], strict=False)
     except LOAD_ERRORS as exc:
         raise ValueError(f"{path}: cannot load its policy weights ({str(exc).splitlines()[0]})") from exc
     foreign = [k for k in missing if not k.startswith("cost_net.")]

@@ -8,10 +8,10 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from envs.policies import AGENTS_DIR  # noqa: E402
-from envs.policies.sb3_files import load_agent, load_policy_weights  # noqa: E402
-from envs.rl.config import TrainConfig  # noqa: E402
-from envs.rl.train import main, make_model, make_vec_env  # noqa: E402
+from envs.policies import AGENTS_DIR
+from envs.policies.sb3_files import load_agent, load_policy_weights
+from envs.rl.config import TrainConfig
+from envs.rl.train import main, make_model, make_vec_env
 
 AGENT = "ppo-crowdnav-20"  # trained in crowdnav-plusplus, a decision every 5 env steps
 
