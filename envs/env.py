@@ -99,7 +99,7 @@ class CrowdNavEnv(gym.Env):
         self._heading_rad = 0.0  # a holonomic robot's sensor heading while it stands (`sensor_heading`)
         self._seen_cache: tuple[CrowdState | None, int, np.ndarray | None] = (None, -1, None)
         self._remembered: set[int] = set()  # the ids the histories hold (limited view)
-        self._pred_ids: np.ndarray | None = None  # the ids `_pred_samples` predicts (limited view)
+        self._pred_ids: np.ndarray | None = None  # the ids `_pred_samples` predicts (rows in its order)
         self._obs: dict[str, np.ndarray] = {}
 
     # ------------------------------------------------------------------------------------------ API
@@ -407,7 +407,7 @@ class CrowdNavEnv(gym.Env):
             self._pred_samples, self._pred_groups = predict(self._predictor, window,
                                                             self.config.observation.n_prediction_samples,
                                                             self._pred_rng, self.timing.pred_len, track)
-        self._pred_ids = p.ped_id if self._limited else None
+        self._pred_ids = p.ped_id
         if self._calib is not None:  # scores the predictions whose time has come, keeps these
             self._calib.update(self._sim_steps // self.config.ticks_per_prediction_step, p.ped_id, p.pos,
                                self._pred_samples)
@@ -454,14 +454,10 @@ class CrowdNavEnv(gym.Env):
     def _observe(self) -> dict[str, np.ndarray]:
         cfg, p = self.config, self._peds()
         if self._limited:
-            p, groups, samples = self._perceived_predictions(p)
+            p = self._rows(p, self._sensor_mask(p))
+            groups, samples = self._predicted_rows(p)
         else:
-            groups, samples = p.group_id, None
-            if cfg.observation.needs_predictor and self._pred_samples is not None \
-                    and self._pred_samples.shape[2] == len(p.pos):  # rows change only between ticks
-                samples = self._pred_samples
-                if cfg.observation.group_source == "predicted":
-                    groups = self._pred_groups
+            groups, samples = self._predicted_rows(p)
             keep = self._sensor_mask(p)
             if keep is not None:
                 p, groups = self._rows(p, keep), groups[keep]  # the mask once, for the rows and their groups
@@ -471,22 +467,21 @@ class CrowdNavEnv(gym.Env):
         return build_observation(cfg, self.observation_space, self.robot_state, self.goal, time_left,
                                  p.pos, p.vel, p.radius, groups, samples, self._walls.segments, calib)
 
-    def _perceived_predictions(self, p: Pedestrians) -> tuple[Pedestrians, np.ndarray, np.ndarray | None]:
-        """With a limited view: the perceived rows of `p` (all pedestrians now), their groups and their predicted
-        samples (K, 12, n, 2) m. The predictor ran on the tick's perceived people (`_pred_ids`); as when rows change
-        between ticks, if someone perceived now has no prediction then nobody's is observed (samples None, groups
-        the truth)."""
-        p = self._rows(p, self._sensor_mask(p))
-        groups, samples = p.group_id, None
-        pred_ids = self._pred_ids
-        if self.config.observation.needs_predictor and self._pred_samples is not None and pred_ids is not None:
-            where = {int(i): k for k, i in enumerate(pred_ids)}
-            at = [where.get(int(i), -1) for i in p.ped_id]
-            if -1 not in at:
-                samples = self._pred_samples[:, :, at]
-                if self.config.observation.group_source == "predicted":
-                    groups = self._pred_groups[at]
-        return p, groups, samples
+    def _predicted_rows(self, p: Pedestrians) -> tuple[np.ndarray, np.ndarray | None]:
+        """The groups (n,) and predicted samples (K, 12, n, 2) m of the rows of `p`, matched by id to the people the
+        last tick's prediction ran on (`_pred_ids`): people arrive and leave between ticks, so a row's prediction is
+        found by its id, never by its position in the table. If someone in `p` has no prediction, nobody's is
+        observed (samples None, groups the truth); groups are the predictor's with `group_source` "predicted"."""
+        groups, samples, ids = p.group_id, None, self._pred_ids
+        if not self.config.observation.needs_predictor or self._pred_samples is None or ids is None:
+            return groups, samples
+        where = {int(i): k for k, i in enumerate(ids)}
+        at = [where.get(int(i), -1) for i in p.ped_id]
+        if -1 not in at:
+            samples = self._pred_samples[:, :, at]
+            if self.config.observation.group_source == "predicted":
+                groups = self._pred_groups[at]
+        return groups, samples
 
     def _facts(self, before_pos: np.ndarray, before: CrowdState, dist_before: float) -> StepFacts:
         """Distances, contact and intrusion of the step just simulated (`before`: the crowd at its start)."""

@@ -205,3 +205,20 @@ def test_the_layout_names_the_calibration_and_the_signature_records_its_meaning(
                               max_pedestrians=3, calibration_alpha=0.2))
     assert mismatches(sig, other) == ["prediction_source 'predictor' (agent) vs 'oracle' (env)",
                                       "calibration_alpha 0.1 (agent) vs 0.2 (env)"]
+
+
+def test_a_rows_prediction_is_found_by_its_id_not_its_place():
+    """People arrive and leave between the predictor's ticks: the observation matches each row to the tick's
+    prediction by pedestrian id. Reordered predictions observe the same; a newcomer in place of someone who left (the
+    head count unchanged) gets nobody's prediction instead of the leaver's."""
+    env = CrowdNavEnv(_config(predictions=True, prediction_source="oracle"))
+    obs = env.reset(seed=4)[0]
+    real = obs["pedestrian_mask"] == 1
+    assert np.abs(obs["predictions"][:, :, real]).sum() > 0
+    order = np.arange(len(env._pred_ids))[::-1]
+    env._pred_ids, env._pred_samples = env._pred_ids[order], env._pred_samples[:, :, order]
+    env._pred_groups = env._pred_groups[order]
+    np.testing.assert_array_equal(env._observe()["predictions"], obs["predictions"])
+    env._pred_ids = env._pred_ids.copy()
+    env._pred_ids[0] = 10**6  # the tick predicted someone who has left since; a newcomer is in the table instead
+    assert np.abs(env._observe()["predictions"]).sum() == 0
