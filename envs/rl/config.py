@@ -190,6 +190,31 @@ class TrainConfig:
             raise ValueError(unknown_name("agent", self.init_from, packaged, "packaged agents (or an SB3 .zip)"))
         return AGENTS_DIR / f"{self.init_from}.zip"
 
+    def input_digests(self) -> dict[str, str]:
+        """The sha256 of the files this run reads by path (a scenario file, the agent it starts from): kept beside
+        config.json (inputs.json) and in every saved agent, and checked on --resume, so that a file edited since the
+        run began cannot silently change what it trains on."""
+        import hashlib
+
+        from crowdsim.scenarios import scenario_digest
+
+        out = {}
+        if self.scenario is not None and scenario_digest(self.scenario) is not None:
+            out["scenario_sha256"] = scenario_digest(self.scenario)
+        if self.init_from:
+            out["init_from_sha256"] = hashlib.sha256(self.init_path().read_bytes()).hexdigest()
+        return out
+
+    def check_inputs(self, saved: dict[str, str]) -> None:
+        """ValueError naming each input file whose sha256 differs from `saved` (a run's inputs.json)."""
+        now = self.input_digests()
+        changed = sorted(k for k in set(saved) | set(now) if saved.get(k) != now.get(k))
+        if changed:
+            what = {"scenario_sha256": f"the scenario file {self.scenario}",
+                    "init_from_sha256": f"the agent {self.init_from}"}
+            raise ValueError(f"{' and '.join(what.get(k, k) for k in changed)} changed since the run began; "
+                             "restore it or start a new run")
+
     @property
     def env_cell(self) -> str:
         """The suite cell trained in ("" without a suite; the mix's name with one)."""

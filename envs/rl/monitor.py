@@ -195,7 +195,7 @@ class TrainMonitor(BaseCallback):
 
     def _meta(self, model: Any) -> dict[str, Any]:
         return {"steps": int(model.num_timesteps), "wall_s": round(self.wall_s, 1), "train_config": self.cfg.to_json(),
-                DECISION_KEY: self.cfg.decision_every_steps, **self.extra}
+                "inputs": self.cfg.input_digests(), DECISION_KEY: self.cfg.decision_every_steps, **self.extra}
 
     def checkpoint(self, model: Any = None) -> None:
         """checkpoints/latest.zip and state.json: what `--resume` reads (`model`: default the one in training)."""

@@ -223,6 +223,7 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
             load_checkpoint(model, monitor, out)
         else:
             write_json_atomic(out / "config.json", cfg.to_json())
+            write_json_atomic(out / "inputs.json", cfg.input_digests())
             (out / "eval.csv").unlink(missing_ok=True)  # a run stopped before its first checkpoint starts again
             if cfg.warm_start != "none":
                 monitor.note_warm_start(warm_start(cfg, model, out, demos_path, backend, address))
@@ -363,6 +364,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]:
     """(config, out folder, resume) from the parsed flags; ValueError on misuse."""
     data: dict[str, Any] = {}
+    saved_inputs: dict[str, str] | None = None
     if args.resume is not None:
         if args.config is not None or args.out is not None:
             raise ValueError("--resume DIR takes its settings from DIR/config.json; drop --config/--out")
@@ -370,6 +372,8 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
         if not path.is_file() or not (args.resume / "checkpoints" / "latest.zip").is_file():
             raise ValueError(f"nothing to resume in {args.resume} (needs config.json and checkpoints/latest.zip)")
         data = json.loads(path.read_text())
+        inputs = args.resume / "inputs.json"  # absent in runs begun before 2026-11-28
+        saved_inputs = json.loads(inputs.read_text()) if inputs.is_file() else None
     elif args.config is not None:
         try:
             data = tomllib.loads(args.config.read_text())
@@ -389,6 +393,8 @@ def config_from_args(args: argparse.Namespace) -> tuple[TrainConfig, Path, bool]
         if items:
             data[key] = {**dict(data.get(key, {})), **term_weights(key, items)}
     cfg = TrainConfig.from_json(data)
+    if args.resume is not None and saved_inputs is not None:
+        cfg.check_inputs(saved_inputs)
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address needs --backend ray")
     if args.backend == "ray" and cfg.warm_start == "none":
