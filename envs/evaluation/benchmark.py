@@ -25,7 +25,7 @@ from envs.evaluation.pool import run_tasks
 from envs.evaluation.records import EpisodeRecord, RecordStore, merge_records, read_records
 from envs.evaluation.suite import DEFAULT_DATA, Cell, Suite
 from envs.policies import PolicyConfig
-from envs.policies.identity import agent_wall_rays, policy_identity
+from envs.policies.identity import agent_observation, policy_identity
 
 RECORDS = "records.jsonl"
 
@@ -46,12 +46,13 @@ def episode_fingerprint(suite: Suite, cell: Cell, policy: PolicyConfig, identity
                        *(policy_identity(policy) if identity is None else identity))
 
 
-def observed(config: CrowdNavConfig, wall_rays: int) -> CrowdNavConfig:
-    """`config` observing `wall_rays` range rays (an agent trained with them: the rays are part of what it sees;
-    they change nothing else, so the other policies' episodes are the same); unchanged for 0."""
-    if not wall_rays or config.observation.wall_rays == wall_rays:
+def observed(config: CrowdNavConfig, fields: dict[str, Any]) -> CrowdNavConfig:
+    """`config` observing what an agent was trained to observe (`envs.policies.identity.agent_observation`: wall
+    rays, predictions and their calibration). Observing changes nothing in the world (the env's predictor draws from
+    its own generator), so the other policies' episodes are the same; unchanged for {}."""
+    if not fields or all(getattr(config.observation, k) == v for k, v in fields.items()):
         return config
-    return replace(config, observation=replace(config.observation, wall_rays=wall_rays))
+    return replace(config, observation=replace(config.observation, **fields))
 
 
 def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[PolicyConfig], out: Path,
@@ -70,9 +71,9 @@ def plan_benchmark(suite: Suite, cells: Sequence[Cell], policies: Sequence[Polic
             if pcfg not in identities:
                 identities[pcfg] = policy_identity(pcfg)
             fp = episode_fingerprint(suite, cell, pcfg, identities[pcfg])
-            rays = agent_wall_rays(pcfg)
+            seen = agent_observation(pcfg)
             for seed in cell.seeds:
-                task = EpisodeTask(observed(cell.env_config(seed, data), rays), pcfg, seed, cell=cell.name,
+                task = EpisodeTask(observed(cell.env_config(seed, data), seen), pcfg, seed, cell=cell.name,
                                    fingerprint=fp, error_dir=str(Path(out) / "errors"))
                 tasks.append(task)
                 old = existing.get((cell.name, pcfg.name, seed))

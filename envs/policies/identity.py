@@ -77,18 +77,37 @@ def policy_identity(cfg: PolicyConfig) -> list[Any]:
     return [conf] if digest is None else [conf, digest]
 
 
-def agent_wall_rays(cfg: PolicyConfig) -> int:
-    """The wall rays an SB3 agent policy (`sb3:` or a packaged agent) was trained to observe (its saved
-    observation's `walls` key); 0 for other policies and agents without rays."""
+def agent_observation(cfg: PolicyConfig) -> dict[str, Any]:
+    """The `ObservationConfig` fields an SB3 agent policy (`sb3:` or a packaged agent) was trained to observe
+    beyond what every policy sees, read from its saved layout: `wall_rays` (its `walls` key), and with predictions
+    `predictions`, `n_prediction_samples`, `prediction_source`, the `predictor` its training run named, and with their
+    calibration `prediction_calibration`, `calibration_alpha`. {} for other policies and agents without them."""
     from envs.policies.sb3_files import read_agent, saved_signature
 
     files = [f for f in artifact_files(cfg) if f.suffix == ".zip"]
     cfg = replace(cfg, name=base_name(cfg.name))
     if not files or not (cfg.name.startswith(SB3_PREFIX) or cfg.name in POLICIES):
-        return 0
+        return {}
     try:
-        saved = saved_signature(*read_agent(files[-1])) or {}
+        data, layout = read_agent(files[-1])
     except ValueError:
-        return 0  # not an agent file: loading it fails later, with its own message
-    return int((saved.get("keys", {}).get("walls") or [0])[0])
+        return {}  # not an agent file: loading it fails later, with its own message
+    saved = saved_signature(data, layout) or {}
+    keys, out = saved.get("keys", {}), {}
+    if keys.get("walls"):
+        out["wall_rays"] = int(keys["walls"][0])
+    if "predictions" in keys:
+        trained = ((layout or {}).get("meta") or {}).get("train_config") or {}
+        out.update(predictions=True, n_prediction_samples=int(keys["predictions"][0]),
+                   prediction_source=saved.get("prediction_source", "predictor"))
+        if trained.get("predictor"):
+            out["predictor"] = trained["predictor"]
+    if "prediction_error" in keys:
+        out.update(prediction_calibration=True, calibration_alpha=float(saved.get("calibration_alpha", 0.1)))
+    return out
+
+
+def agent_wall_rays(cfg: PolicyConfig) -> int:
+    """The wall rays an SB3 agent policy was trained to observe (`agent_observation`); 0 for others."""
+    return int(agent_observation(cfg).get("wall_rays", 0))
 

@@ -102,3 +102,38 @@ def test_an_agent_with_calibrated_predictions_saves_loads_and_is_checked_at_eval
     for message, observation in others.items():
         with pytest.raises(ValueError, match=message):
             make_policy(PolicyConfig(f"sb3:{path}"), CrowdNavEnv(replace(cfg, observation=observation)))
+
+
+def test_the_benchmark_observes_what_the_agent_was_trained_to_observe(tmp_path):
+    """A benchmark cell observes no predictions; an agent trained on calibrated oracle predictions runs in it with
+    them (its saved layout says what), and every other policy's episodes keep the cell's observation."""
+    from stable_baselines3 import PPO
+
+    from envs.evaluation.benchmark import plan_benchmark, run_benchmark
+    from envs.evaluation.suite import load_suite
+    from envs.policies import PolicyConfig
+    from envs.policies.identity import agent_observation
+    from envs.policies.sb3_files import save_agent
+
+    suite = load_suite("smoke")
+    cell = next(c for c in suite.cells if not c.is_real)
+    seen = ObservationConfig(predictions=True, prediction_source="oracle", prediction_calibration=True,
+                             calibration_alpha=0.2, n_prediction_samples=2)
+    cfg = replace(cell.env_config(cell.seeds[0]), observation=seen)
+    kwargs = {"features_extractor_class": CrowdAttentionExtractor, "net_arch": {"pi": [16], "vf": [16]},
+              "features_extractor_kwargs": {"use_predictions": True, "use_calibration": True}}
+    model = PPO("MultiInputPolicy", CrowdNavEnv(cfg), n_steps=32, batch_size=32, n_epochs=1, seed=0,
+                policy_kwargs=kwargs, device="cpu")
+    path = tmp_path / "agent.zip"
+    save_agent(model, path, cfg, {"train_config": {"predictor": "constant-velocity"}})
+    agent = PolicyConfig(f"sb3:{path}")
+    assert agent_observation(agent) == {"predictions": True, "n_prediction_samples": 2,
+                                        "prediction_source": "oracle", "predictor": "constant-velocity",
+                                        "prediction_calibration": True, "calibration_alpha": 0.2}
+    assert agent_observation(PolicyConfig("mpc-cv")) == {}
+    plan = plan_benchmark(suite, [cell], [agent, PolicyConfig("mpc-cv")], tmp_path / "bench")
+    by_policy = {t.policy.name: t.env.observation for t in plan.tasks}
+    assert by_policy[agent.name].prediction_calibration and by_policy[agent.name].prediction_source == "oracle"
+    assert by_policy["mpc-cv"] == cell.env_config(cell.seeds[0]).observation
+    board = run_benchmark(suite, [cell], [agent], tmp_path / "bench", progress=False)
+    assert board["run"]["episodes_run"] == len(cell.seeds)

@@ -114,8 +114,8 @@ def test_the_benchmark_shows_a_wall_ray_agent_its_rays_and_nobody_else(tmp_path)
 
     suite = load_suite("crowdnav-v1")
     cell = suite.cell("corridor-low-visible")
-    cfg = observed(cell.env_config(0), 8)
-    assert cfg.observation.wall_rays == 8 and observed(cfg, 0) is cfg
+    cfg = observed(cell.env_config(0), {"wall_rays": 8})
+    assert cfg.observation.wall_rays == 8 and observed(cfg, {}) is cfg and observed(cfg, {"wall_rays": 8}) is cfg
     path = tmp_path / "rays.zip"
     save_agent(PPO("MultiInputPolicy", CrowdNavEnv(cfg), n_steps=64, batch_size=32, device="cpu", seed=0,
                    policy_kwargs={"features_extractor_class": CrowdAttentionExtractor}), path, cfg)

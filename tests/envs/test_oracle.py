@@ -68,9 +68,9 @@ def _for(name: str, config: CrowdNavConfig) -> CrowdNavConfig:
     """`config` with the robot a registry policy runs and the wall rays a packaged agent was trained with."""
     from envs.evaluation.benchmark import observed
     from envs.policies import PolicyConfig
-    from envs.policies.identity import agent_wall_rays
+    from envs.policies.identity import agent_observation
 
-    return observed(replace(config, robot=_robot_for(name)), agent_wall_rays(PolicyConfig(name)))
+    return observed(replace(config, robot=_robot_for(name)), agent_observation(PolicyConfig(name)))
 
 
 def _actions(replay: ReplayConfig, name: str, steps: int) -> np.ndarray:

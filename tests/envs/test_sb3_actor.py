@@ -9,7 +9,7 @@ from envs import CrowdNavEnv
 from envs.evaluation.benchmark import observed
 from envs.evaluation.suite import load_suite
 from envs.policies import PolicyConfig, make_policy
-from envs.policies.identity import agent_wall_rays
+from envs.policies.identity import agent_observation
 from envs.policies.sb3_actor import mean_actor
 
 CASES = [("ppo-crowdnav", None, None), ("ppo-crowdnav-mix", "crowdnav-v1", "corridor-high-visible"),
@@ -19,7 +19,7 @@ CASES = [("ppo-crowdnav", None, None), ("ppo-crowdnav-mix", "crowdnav-v1", "corr
 @pytest.mark.parametrize(("name", "suite", "cell"), CASES)
 def test_mean_actor_equals_predict(name, suite, cell):
     cfg = PolicyConfig(name)
-    env_cfg = None if suite is None else observed(load_suite(suite).cell(cell).env_config(0), agent_wall_rays(cfg))
+    env_cfg = None if suite is None else observed(load_suite(suite).cell(cell).env_config(0), agent_observation(cfg))
     env = CrowdNavEnv(env_cfg) if env_cfg is not None else CrowdNavEnv()
     policy = make_policy(cfg, env)
     fast = mean_actor(policy.model)
