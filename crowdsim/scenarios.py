@@ -178,6 +178,15 @@ def scenario_file(name: str) -> ScenarioFile:
     return SCENARIOS[name]
 
 
+def builtin_name(name: str) -> str | None:
+    """The built-in scenario `name` stands for: itself for a built-in's name; for a scenario file with the bytes of
+    a built-in's file (the shipped file run by its path, or a copy), that built-in's name; else None."""
+    if not is_scenario_file(name):
+        return name if name in SCENARIOS else None
+    digest = scenario_file(name).sha256
+    return next((n for n, f in SCENARIOS.items() if f.sha256 == digest), None)
+
+
 def scenario_digest(name: str) -> str | None:
     """The sha256 of a scenario file's bytes (what records of it depend on), None for a built-in name."""
     return scenario_file(name).sha256 if is_scenario_file(name) else None

@@ -12,6 +12,7 @@ from typing import Protocol
 import numpy as np
 
 from crowdsim import CrowdSimulator, CrowdState, SimConfig
+from crowdsim.scenarios import builtin_name
 
 
 class Crowd(Protocol):
@@ -100,11 +101,12 @@ class SimCrowd:
         return out
 
     def robot_route(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """A start and a goal (2,) m for this scenario (see `ROUTES`; a scenario file with a [robot] table:
-        `area_route`; other scenarios: `side_to_side`)."""
-        if self.name not in ROUTES and self.sim.scenario.robot_start is not None:
+        """A start and a goal (2,) m for this scenario (see `ROUTES`, also for a built-in's file run by its path; a
+        scenario file with a [robot] table: `area_route`; other scenarios: `side_to_side`)."""
+        name = builtin_name(self.name) or self.name
+        if name not in ROUTES and self.sim.scenario.robot_start is not None:
             return area_route(self, rng)
-        return ROUTES.get(self.name, side_to_side)(self, rng)
+        return ROUTES.get(name, side_to_side)(self, rng)
 
 
 def area_route(crowd: SimCrowd, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

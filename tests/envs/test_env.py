@@ -385,3 +385,22 @@ def test_a_control_is_applied_as_it_is_and_an_action_through_its_scaling():
     np.testing.assert_allclose(c.robot_state, a.robot_state, atol=1e-6)
     with pytest.raises(ValueError, match="finite"):
         a.step_control(np.array([np.nan, 0.0]))
+
+
+@pytest.mark.parametrize("name", ["plaza", "corridor", "circle_crossing"])
+def test_a_builtin_scenarios_file_run_by_its_path_is_that_scenario(name, tmp_path):
+    """`--scenario crowdsim/builtin_scenarios/plaza.toml` (or a byte-for-byte copy) is the built-in `plaza`: the
+    same robot route and crowd; an edited copy without a [robot] table gets the generic side-to-side route."""
+    import shutil
+
+    from crowdsim.scenarios import BUILTIN_DIR, builtin_name
+
+    path = tmp_path / f"{name}.toml"
+    shutil.copy(BUILTIN_DIR / f"{name}.toml", path)
+    assert builtin_name(str(path)) == name and builtin_name(name) == name
+    by_name = CrowdNavEnv(CrowdNavConfig(scenario=name, n_pedestrians=8)).reset(seed=3)[0]
+    by_path = CrowdNavEnv(CrowdNavConfig(scenario=str(path), n_pedestrians=8)).reset(seed=3)[0]
+    for key in by_name:
+        np.testing.assert_array_equal(by_path[key], by_name[key])
+    path.write_text(path.read_text() + "\n# edited\n")
+    assert builtin_name(str(path)) is None
