@@ -217,6 +217,8 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
     try:
         model = make_model(cfg, vec_env)
         formats = ["csv", "tensorboard"] if tensorboard_available() else ["csv"]
+        if resume:  # SB3's CSV writer starts its file afresh: the rows before are kept as progress.partN.csv
+            keep_progress(out / "tb")
         model.set_logger(configure(str(out / "tb"), formats))
         monitor = TrainMonitor(cfg, out)
         if resume:
@@ -253,6 +255,18 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
         return 1
     finally:
         vec_env.close()
+
+
+def keep_progress(folder: Path) -> Path | None:
+    """Move folder/progress.csv (the rows logged before a resume) to the first free progress.partN.csv (N = 1, 2,
+    ...) and return its new path; None when there is none."""
+    path = folder / "progress.csv"
+    if not path.is_file():
+        return None
+    n = 1
+    while (folder / f"progress.part{n}.csv").exists():
+        n += 1
+    return path.rename(folder / f"progress.part{n}.csv")
 
 
 def check_demos(path: Path, cfg: TrainConfig) -> None:

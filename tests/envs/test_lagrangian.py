@@ -258,6 +258,8 @@ def test_crowdnav_train_constraint_logs_lambda_resumes_with_it_and_the_agent_ben
     assert "lambda 1.000" in capsys.readouterr().out
     assert main(["train", "--resume", str(out), "--steps", "256"]) == 0
     second = _progress(out)[256]
+    before = {int(r["time/total_timesteps"]) for r in csv.DictReader((out / "tb" / "progress.part1.csv").open())}
+    assert 128 in before and 256 not in before  # the rows logged before the resume are kept beside the new ones
     assert float(second["constraint/lagrange_multiplier"]) == saved
     state = json.loads((out / "checkpoints" / "state.json").read_text())
     assert state["steps"] == 256 and state["lagrangian"]["multiplier"] == \
