@@ -246,8 +246,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     check_writable_dir(args.out)
     if args.json is not None:
         check_writable_file(args.json)
+    seen = {pcfg: _agent_config(config, pcfg, args) for pcfg in configs}  # what each agent was trained to observe
     for pcfg in configs:  # every policy and plug-in builds before any episode runs
-        check_setup(pcfg, config)
+        check_setup(pcfg, seen[pcfg])
     if (warning := _frame_step_warning(args)) is not None:  # after every check: a misuse stays one line
         print(warning, file=sys.stderr)
     for note in _group_notes(config):
@@ -257,7 +258,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     results = []
     for pcfg in configs:
         try:
-            result = evaluate(pcfg, config, args.episodes, args.seed, args.workers, args.record, args.out,
+            result = evaluate(pcfg, seen[pcfg], args.episodes, args.seed, args.workers, args.record, args.out,
                               progress=not args.no_progress, backend=args.backend, address=args.address, check=False,
                               video=args.video, video_format=str(args.video_format), video_size=int(args.video_size))
         except KeyboardInterrupt as exc:
@@ -277,6 +278,18 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.json is not None:
         write_json_atomic(args.json, results[0] if len(results) == 1 else compare_json(results))
     return 0
+
+
+def _agent_config(config: CrowdNavConfig, pcfg: Any, args: argparse.Namespace) -> CrowdNavConfig:
+    """`config` observing what an SB3 agent was trained to observe (predictions, their calibration, wall rays:
+    `envs.policies.identity.agent_observation`), as `crowdnav benchmark` does; a flag the user gave (--wall-rays) is
+    kept, so that a contradiction is refused by the agent's layout check rather than overridden. Other policies:
+    `config` itself."""
+    from envs.evaluation.benchmark import observed
+    from envs.policies.identity import agent_observation
+
+    fields = {k: v for k, v in agent_observation(pcfg).items() if not (k == "wall_rays" and args.wall_rays is not None)}
+    return observed(config, fields)
 
 
 def _benchmark(args: argparse.Namespace) -> int:

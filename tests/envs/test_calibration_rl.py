@@ -137,3 +137,30 @@ def test_the_benchmark_observes_what_the_agent_was_trained_to_observe(tmp_path):
     assert by_policy["mpc-cv"] == cell.env_config(cell.seeds[0]).observation
     board = run_benchmark(suite, [cell], [agent], tmp_path / "bench", progress=False)
     assert board["run"]["episodes_run"] == len(cell.seeds)
+
+
+def test_crowdnav_evaluate_observes_what_the_agent_was_trained_to_observe(tmp_path, capsys):
+    from stable_baselines3 import PPO
+
+    from envs.cli import main
+    from envs.policies.sb3_files import save_agent
+
+    seen = ObservationConfig(predictions=True, prediction_source="oracle", prediction_calibration=True,
+                             n_prediction_samples=1)
+    cfg = CrowdNavConfig(scenario="circle_crossing", n_pedestrians=5, time_limit_s=4.0, observation=seen)
+    kwargs = {"features_extractor_class": CrowdAttentionExtractor, "net_arch": {"pi": [16], "vf": [16]},
+              "features_extractor_kwargs": {"use_predictions": True, "use_calibration": True}}
+    model = PPO("MultiInputPolicy", CrowdNavEnv(cfg), n_steps=32, batch_size=32, n_epochs=1, seed=0,
+                policy_kwargs=kwargs, device="cpu")
+    path = tmp_path / "agent.zip"
+    save_agent(model, path, cfg)
+    run = ["evaluate", "--policy", f"sb3:{path}", "mpc-cv", "--scenario", "circle_crossing", "--pedestrians", "5",
+           "--time-limit", "4", "--episodes", "1", "--workers", "1", "--no-progress"]
+    assert main([*run, "--out", str(tmp_path / "eval")]) == 0
+    results = [json.loads(f.read_text()) for f in (tmp_path / "eval").glob("*.json") if f.stem != "comparison"]
+    assert sorted(r["policy"][:3] for r in results) == ["mpc", "sb3"]  # both ran their episode
+    assert all(r["completed"] == 1 and r["errors"] == 0 for r in results)
+    capsys.readouterr()
+    assert main([*run[:3], "--scenario", "circle_crossing", "--pedestrians", "5", "--wall-rays", "8", "--episodes",
+                 "1", "--out", str(tmp_path / "rays")]) == 2  # contradicts the agent: refused, not overridden
+    assert "walls" in capsys.readouterr().err
