@@ -304,9 +304,11 @@ def test_an_agent_trained_with_wall_rays_is_evaluated_with_them(tmp_path, capsys
     argv = ["evaluate", "--policy", f"sb3:{tmp_path / 'run' / 'final.zip'}", "--scenario", "corridor",
             "--pedestrians", "6", "--episodes", "1", "--workers", "1", "--record", "0", "--no-progress",
             "--time-limit", "6", "--out", str(tmp_path / "eval")]
+    assert main(argv) == 0  # the agent observes the rays it was trained with (`agent_observation`)
+    assert main([*argv, "--wall-rays", "8", "--out", str(tmp_path / "eval8")]) == 0
     capsys.readouterr()
-    assert main(argv) == 2 and "key 'walls' only in the agent's observation" in capsys.readouterr().err
-    assert main([*argv, "--wall-rays", "8"]) == 0
+    assert main([*argv, "--wall-rays", "4", "--out", str(tmp_path / "eval4")]) == 2  # contradicts it: refused
+    assert "walls shape (8,) (agent) vs (4,) (env)" in capsys.readouterr().err
 
 
 def test_progress_eta_never_goes_negative():
