@@ -38,19 +38,14 @@ def test_the_run_starts_with_the_agents_actions(constraint):
     assert bool(fresh) == bool(constraint) and all(k.startswith("cost_net.") for k in fresh)
 
 
-def test_another_decision_period_or_layout_is_refused():
-    cfg = TrainConfig(suite="crowdnav-plusplus", decision_every_steps=1, envs=1)
+@pytest.mark.parametrize("every, pedestrians, says", [(1, 20, "decides every 5 env steps"),
+                                                      (5, 10, "another observation layout")])
+def test_another_decision_period_or_layout_is_refused(every, pedestrians, says):
+    cfg = TrainConfig(suite="crowdnav-plusplus", decision_every_steps=every, envs=1, max_pedestrians=pedestrians)
     vec = make_vec_env(cfg)
     try:
-        with pytest.raises(ValueError, match="decides every 5 env steps"):
-            load_policy_weights(make_model(cfg, vec), AGENTS_DIR / f"{AGENT}.zip", cfg.env_config(), 1)
-    finally:
-        vec.close()
-    wide = TrainConfig(suite="crowdnav-plusplus", decision_every_steps=5, envs=1, max_pedestrians=10)
-    vec = make_vec_env(wide)
-    try:
-        with pytest.raises(ValueError, match="another observation layout"):
-            load_policy_weights(make_model(wide, vec), AGENTS_DIR / f"{AGENT}.zip", wide.env_config(), 5)
+        with pytest.raises(ValueError, match=says):
+            load_policy_weights(make_model(cfg, vec), AGENTS_DIR / f"{AGENT}.zip", cfg.env_config(), every)
     finally:
         vec.close()
 
