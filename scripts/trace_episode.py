@@ -3,7 +3,8 @@
 Per re-plan: time, robot pose and speed, the solve's status and fallback, whether the safety shield replaced the
 plan's control (and the risk it saw), the plan's largest clearance violation (slack, m), the applied control, the
 plan's end point, the subgoal (the goal or the route's carrot), how many passing options were solved (guidance), and
-the three nearest pedestrians (centre distance, position, velocity). Then the outcome. This is how the failures in
+the three nearest pedestrians (centre distance, position, velocity). Then the outcome, with the share of the
+episode's plans the shield replaced and that carried slack, overall and in the last 3 s. This is how the failures in
 docs/decisions/planner-settings.md were found (e.g. plans that ended behind a corridor wall). For tuning suites and
 cells; it reads nothing a policy may not.
 
@@ -25,6 +26,9 @@ from envs.cli import build_parser
 from envs.cli_options import policy_configs
 from envs.evaluation.suite import load_suite
 from envs.policies import decide, make_policy
+
+SLACK_M = 0.05  # a plan counts as infeasible at its clearances above this slack, m
+LAST_S = 3.0  # the summary's closing window, s
 
 
 def _line(t: float, robot: np.ndarray, result: Any, peds: Any) -> str:
@@ -68,16 +72,33 @@ def trace(suite: str, cell_name: str, seed: int, policy: str, t_from: float, t_t
     planner.plan = recorded
     env.reset(seed=seed)
     pol.reset(seed)
-    done, step, info = False, 0, {}
+    done, step, info, times = False, 0, {}, []
     while not done:
         robot, peds, before = env.robot_state.copy(), env.pedestrians(), len(results)
         decision = decide(pol, env)
-        if len(results) > before and t_from <= step * cfg.dt_s <= t_to:
-            print(_line(step * cfg.dt_s, robot, results[-1], peds))
+        if len(results) > before:
+            times.append(step * cfg.dt_s)
+            if t_from <= step * cfg.dt_s <= t_to:
+                print(_line(step * cfg.dt_s, robot, results[-1], peds))
         _, _, term, trunc, info = env.step_decision(decision)
         done, step = term or trunc, step + 1
     m = info["episode_metrics"]
-    return f"{m['outcome']} at {m['time_s']:.1f} s" + (f" ({m['at_fault']} at fault)" if m["at_fault"] else "")
+    outcome = f"{m['outcome']} at {m['time_s']:.1f} s" + (f" ({m['at_fault']} at fault)" if m["at_fault"] else "")
+    return outcome + _summary(np.array(times), results, step * cfg.dt_s)
+
+
+def _summary(times: np.ndarray, results: list[Any], end_s: float) -> str:
+    """" | N plans: shield F (last 3 s: F3), slack > 0.05 m S (last 3 s: S3)": the fractions of the episode's plans
+    whose first control the shield replaced and that carried more than SLACK_M of slack, over the whole episode and
+    its last LAST_S seconds (docs/decisions/planner-guidance.md, "The shield's share of control")."""
+    if not results:
+        return " | 0 plans"
+    shielded = np.array([r.shielded for r in results], float)
+    slack = np.array([r.max_slack_m > SLACK_M for r in results], float)
+    last = times >= end_s - LAST_S
+    window = f"last {LAST_S:.0f} s"
+    return (f" | {len(results)} plans: shield {shielded.mean():.2f} ({window}: {shielded[last].mean():.2f}), "
+            f"slack > {SLACK_M} m {slack.mean():.2f} ({window}: {slack[last].mean():.2f})")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -149,6 +149,13 @@ def test_trace_episode_replays_the_benchmark_episode_and_refuses_misuse(capsys, 
     assert lines[-1].startswith(f"{m['outcome']} at {m['time_s']:.1f} s")
     replans = [ln for ln in lines[:-1] if ln.startswith("t=")]
     assert len(replans) == 11 and all("slack=" in ln and "shield=" in ln for ln in replans)  # 1.0 .. 2.0 s, 0.1 s
+    assert trace.main(["crowdnav-tune", cell.name, str(seed), "--policy", "mpc-cv"]) == 0  # every re-plan printed
+    lines = capsys.readouterr().out.strip().splitlines()
+    replans = [ln for ln in lines if ln.startswith("t=")]
+    shielded = sum("shield=yes" in ln for ln in replans) / len(replans)
+    slack = sum(float(ln.split("slack=")[1].split()[0]) > 0.05 for ln in replans) / len(replans)
+    assert f" | {len(replans)} plans: shield {shielded:.2f} (last 3 s: " in lines[-1]  # the summary counts them
+    assert f"slack > 0.05 m {slack:.2f} (last 3 s: " in lines[-1]
     assert trace.main(["crowdnav-tune", cell.name, "5"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("trace_episode: seed 5 is not one of")
