@@ -35,7 +35,7 @@ from envs.env import CrowdNavEnv
 from envs.evaluation.benchmark import observed
 from envs.evaluation.suite import load_suite
 from envs.policies import ENV_MPC, PolicyConfig, act, make_policy
-from envs.policies.identity import agent_wall_rays
+from envs.policies.identity import agent_observation
 from predictor import set_threads
 
 SEED0 = 400_000
@@ -54,7 +54,7 @@ def decision_times(suite_name: str, cell: str, name: str, episodes: int,
     shield = {} if shield_horizon_s is None else {"shield_horizon_s": shield_horizon_s}
     config = PolicyConfig(name, mpc=replace(ENV_MPC, **shield)) if agent else \
         PolicyConfig(name, mpc=suite.mpc_config(ENV_MPC), replan_every_steps=every)
-    env = CrowdNavEnv(observed(suite.cell(cell).env_config(SEED0), agent_wall_rays(config)))
+    env = CrowdNavEnv(observed(suite.cell(cell).env_config(SEED0), agent_observation(config)))
     policy = make_policy(config, env)
     every = getattr(policy, "decision_every_steps", every)
     times = []

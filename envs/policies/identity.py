@@ -105,9 +105,3 @@ def agent_observation(cfg: PolicyConfig) -> dict[str, Any]:
     if "prediction_error" in keys:
         out.update(prediction_calibration=True, calibration_alpha=float(saved.get("calibration_alpha", 0.1)))
     return out
-
-
-def agent_wall_rays(cfg: PolicyConfig) -> int:
-    """The wall rays an SB3 agent policy was trained to observe (`agent_observation`); 0 for others."""
-    return int(agent_observation(cfg).get("wall_rays", 0))
-

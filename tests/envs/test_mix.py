@@ -134,12 +134,12 @@ def test_the_packaged_generalist_sees_its_rays_in_the_benchmark_and_reaches_its_
     the 16 rays it was trained with, and an env without rays refuses it."""
     from envs.evaluation.episode import run_task
     from envs.policies import make_policy
-    from envs.policies.identity import agent_wall_rays
+    from envs.policies.identity import agent_observation
 
     suite = load_suite("crowdnav-v1")
     cell = suite.cell("plaza-low-visible")
     agent = PolicyConfig("ppo-crowdnav-mix")
-    assert agent_wall_rays(agent) == 16
+    assert agent_observation(agent) == {"wall_rays": 16}
     plan = plan_benchmark(suite, [cell], [agent], "/nonexistent-out")
     outcomes = [run_task(t)["record"].outcome for t in plan.tasks]
     assert len(outcomes) == 10 and outcomes.count("success") >= 8, outcomes
