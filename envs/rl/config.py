@@ -199,8 +199,9 @@ class TrainConfig:
         from crowdsim.scenarios import scenario_digest
 
         out = {}
-        if self.scenario is not None and scenario_digest(self.scenario) is not None:
-            out["scenario_sha256"] = scenario_digest(self.scenario)
+        digest = None if self.scenario is None else scenario_digest(self.scenario)
+        if digest is not None:
+            out["scenario_sha256"] = digest
         if self.init_from:
             out["init_from_sha256"] = hashlib.sha256(self.init_path().read_bytes()).hexdigest()
         return out
