@@ -21,7 +21,7 @@ from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
-from planner import GuidanceConfig, RouteConfig
+from planner import ForesightConfig, GuidanceConfig, RouteConfig
 
 if TYPE_CHECKING:
     from envs.evaluation.suite import Suite
@@ -155,6 +155,9 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items:
         key, sep, text = item.partition("=")
+        if sep and "." in key:
+            out.update(_nested_override(item, key, text, out))
+            continue
         if not sep or key not in valid:
             if sep:
                 raise ValueError(unknown_name("--mpc field", key, valid))
@@ -163,12 +166,33 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-NESTED = {"route": RouteConfig, "guidance": GuidanceConfig}  # --mpc FIELD=default gives these configs
+NESTED = {"route": RouteConfig, "guidance": GuidanceConfig,  # --mpc FIELD=default gives these configs
+          "foresight": ForesightConfig}
+
+
+def _nested_override(item: str, key: str, text: str, out: dict[str, Any]) -> dict[str, Any]:
+    """--mpc NESTED.FIELD=VALUE (e.g. foresight.horizon_s=6): that field of the nested config, on top of what an
+    earlier item set, else of its defaults."""
+    outer, _, inner = key.partition(".")
+    if outer not in NESTED:
+        raise ValueError(unknown_name("--mpc nested config", outer, NESTED))
+    valid = {f.name: f for f in fields(NESTED[outer])}
+    if inner not in valid:
+        raise ValueError(unknown_name(f"--mpc {outer} field", inner, valid))
+    base = out.get(outer) or NESTED[outer]()
+    current = getattr(base, inner)
+    try:
+        value = current if isinstance(current, tuple) else type(current)(text)
+        if isinstance(current, tuple) or isinstance(current, bool):
+            raise ValueError(text)
+    except ValueError as exc:
+        raise ValueError(f"--mpc {item!r}: {text!r} is not a {type(current).__name__} this option can set") from exc
+    return {outer: replace(base, **{inner: value})}
 
 
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
     """The value of one --mpc FIELD=VALUE: a scalar of the field's type, `none` for an optional field, and for
-    the nested configs (`NESTED`: `route`, `guidance`) one of none (e.g. no global route) or default (e.g.
+    the nested configs (`NESTED`: `route`, `guidance`, `foresight`) one of none (e.g. no global route) or default (e.g.
     `planner.RouteConfig()`)."""
     if optional and text.lower() == "none":
         return None

@@ -134,6 +134,35 @@ class GuidanceConfig:
 
 
 @dataclass(frozen=True)
+class ForesightConfig:
+    """Settings of the foresight search (planner/foresight.py): reachable sets over a long view against the predicted
+    people, the subgoal on the earliest way to the goal; metres, seconds."""
+
+    horizon_s: float = 10.0  # how far the search looks; predictions shorter than this are extended (module docstring)
+    step_s: float = 0.4  # time between the reachable sets (the predictor's step)
+    cell_m: float = 0.15  # grid cell side
+    clearance_m: float = 0.3  # kept beyond robot radius + person radius from every person's sample mean (a search
+    # in which no set lives to the end is run again without it)
+    speed_fraction: float = 0.85  # of the robot's top speed: the searched robot is slower, room to track its way
+    spread_inflation: float = 0.5  # clearance added per metre of the samples' RMS spread about their mean, m/m
+    max_inflation_m: float = 0.3  # cap on that inflation, m
+    goal_reach_m: float = 0.5  # a reachable cell this near the target ends the search
+    lead_s: float = 1.6  # the subgoal is the searched path's point this far ahead
+
+    def __post_init__(self) -> None:
+        _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))
+        if not 0.0 < self.speed_fraction <= 1.0:
+            raise ValueError(f"ForesightConfig.speed_fraction must be in (0, 1], got {self.speed_fraction!r}")
+        _check_non_negative(self, ("clearance_m", "spread_inflation", "max_inflation_m"))
+        for name in ("horizon_s", "step_s", "cell_m", "clearance_m", "spread_inflation", "max_inflation_m",
+                     "goal_reach_m", "lead_s"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"ForesightConfig.{name} must be finite, got {getattr(self, name)!r}")
+        if self.horizon_s < self.step_s:
+            raise ValueError(f"ForesightConfig.horizon_s must be >= step_s, got {self.horizon_s} < {self.step_s}")
+
+
+@dataclass(frozen=True)
 class MPCConfig:
     """Sizes, timing and solver choice of the MPC. Sizes are fixed when the problem is built."""
 
@@ -183,6 +212,8 @@ class MPCConfig:
     route: RouteConfig | None = None
     # -- guidance layer (planner/guidance.py); None (default): one free solve, the MPC before 2026-11-28 ----------
     guidance: GuidanceConfig | None = None
+    # -- foresight search (planner/foresight.py); None (default): off ----------------------------------------------
+    foresight: ForesightConfig | None = None
 
     @property
     def wall_clearance_m(self) -> float:

@@ -10,6 +10,7 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.dynamics import brake_control, clip_control, model_dims, step_numpy
+from planner.foresight import ForesightSearch
 from planner.guidance import (
     checked_points,
     goal_rollouts,
@@ -106,6 +107,9 @@ class MPCPlanner:
         self._sides: dict[int, int] = {}  # guidance: the passing sides of the last applied plan (input row -> side)
         self._options: list[tuple[np.ndarray, np.ndarray, dict[int, int] | None]] = []  # other solved plans, best first
         self.router = Router(self.config.route, self.config.wall_clearance_m) if self.config.route is not None else None
+        fs, robot = self.config.foresight, self.config.robot
+        self.foresight = None if fs is None else ForesightSearch(fs, robot.max_speed_mps, robot.radius_m,
+                                                                 self.config.wall_clearance_m)
 
     def reset(self) -> None:
         """Forget the stored plan (warm start and fallback), the passing options and the route; keep the stats."""
@@ -128,7 +132,7 @@ class MPCPlanner:
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
         routed = time.perf_counter()
         try:
-            subgoal = self._subgoal(state, goal, obstacles)
+            subgoal = self._subgoal(state, goal, prediction, obstacles)
             routed = time.perf_counter() - routed
             result = self._solve(state, subgoal, prediction, obstacles)
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
@@ -140,12 +144,15 @@ class MPCPlanner:
         self.stats.record(result)
         return result
 
-    def _subgoal(self, state: np.ndarray, goal: np.ndarray, obstacles: np.ndarray | None) -> np.ndarray:
+    def _subgoal(self, state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
+                 obstacles: np.ndarray | None) -> np.ndarray:
         """The point the solve heads for: the goal; with a route (``config.route``) and walls, the route's subgoal
-        (planner/route.py)."""
+        (planner/route.py); with the foresight search (``config.foresight``), a point on its way to that one."""
         subgoal = goal
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
+        if self.foresight is not None:
+            subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles)
         return subgoal
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:

@@ -271,6 +271,8 @@ class OraclePolicy(PlannerPolicy):
     def __init__(self, config: MPCConfig, replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
         super().__init__("mpc-oracle", MPCPlanner(config), oracle_prediction, replan_every_steps)
         self.future_s = config.horizon_steps * config.dt_s  # the whole horizon known, however long (--mpc)
+        if config.foresight is not None:  # and the foresight search's view
+            self.future_s = max(self.future_s, config.foresight.horizon_s)
 
 
 class HalfOraclePolicy(GPGraphPolicy):
