@@ -40,6 +40,7 @@ from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.scoring.collisions import SPAWN_WINDOW_S
 from planner import point_segment_distances
+from planner.foresight import trace_back  # the bounds' witness and the planner's foresight search trace alike
 
 VERDICTS = ("infeasible", "feasible", "open")
 DEFAULT_CHECK_S = 0.2  # the optimistic set's check period by default: the smallest multiple of the env step >= this
@@ -303,20 +304,6 @@ def _conservative(course: Course, grid: _Grid, keep: bool, speed_mps: float | No
         if not reach.any():
             break
     return None, None
-
-
-def trace_back(sets: list[np.ndarray], end: tuple[int, ...], pad: int) -> list[tuple[int, ...]]:
-    """One path of grid cells back through reachable sets: `end` (a cell of sets[-1]), then for each set before it
-    the nearest of its cells within `pad` cells (the set grew by less than that per step, so one is there).
-    Returns the cells in forward order, sets[0]'s first."""
-    cell = tuple(int(c) for c in end)
-    path = [cell]
-    for mask in sets[-2::-1]:
-        lo = np.maximum(np.array(cell) - pad, 0)
-        cand = np.argwhere(mask[lo[0]:cell[0] + pad + 1, lo[1]:cell[1] + pad + 1]) + lo
-        cell = tuple(int(c) for c in cand[np.argmin(np.hypot(*(cand - np.array(cell)).T))])
-        path.append(cell)
-    return path[::-1]
 
 
 def _fill(corners: np.ndarray, stride: int) -> np.ndarray:

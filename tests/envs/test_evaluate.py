@@ -274,6 +274,28 @@ def test_optional_mpc_fields_take_none_and_the_route_takes_none_or_default():
         policy_configs(build_parser().parse_args(["evaluate", "--policy", "mpc-cv", "--mpc", "lane=default"]))
 
 
+def test_a_nested_config_field_is_set_by_its_dotted_name():
+    from envs.cli import build_parser
+    from envs.cli_options import policy_configs
+    from planner import ForesightConfig
+
+    def parse(*items: str):
+        return policy_configs(build_parser().parse_args(
+            ["evaluate", "--policy", "mpc-cv", *(a for item in items for a in ("--mpc", item))]))[0].mpc
+
+    mpc = parse("foresight.horizon_s=6", "foresight.lead_s=1.2")
+    assert mpc.foresight == ForesightConfig(horizon_s=6.0, lead_s=1.2)  # the second item kept the first
+    assert parse("foresight=default").foresight == ForesightConfig() and parse().foresight is None
+    with pytest.raises(ValueError, match="horizon_s"):  # the nested config's own check
+        parse("foresight.horizon_s=-1")
+    with pytest.raises(ValueError, match="did you mean"):
+        parse("foresight.horizon=6")
+    with pytest.raises(ValueError, match="did you mean"):
+        parse("foresigt.horizon_s=6")
+    with pytest.raises(ValueError, match="is not a float"):
+        parse("foresight.horizon_s=far")
+
+
 def test_every_registry_policy_states_the_flags_it_reads():
     from envs.cli_options import FLAG_FIELDS, POLICY_FLAGS
     from envs.policies import POLICIES, PREDICTOR_POLICIES

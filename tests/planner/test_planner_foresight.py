@@ -1,0 +1,96 @@
+"""The foresight search (planner/foresight.py): it leaves the MPC alone where the straight run is free, finds a way
+that keeps clear of everyone where it is not (waiting or going round), keeps out of walls, and extends a short
+prediction at constant velocity."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner import ForesightConfig, MPCConfig, MPCPlanner, PedPrediction
+from planner.foresight import ForesightSearch, person_tracks
+
+RADIUS = 0.3
+
+
+def _walkers(start: np.ndarray, velocity: np.ndarray, steps: int = 25, step_s: float = 0.4) -> PedPrediction:
+    """People at start (N, 2) m walking at velocity (N, 2) m/s, one exact sample of `steps` steps."""
+    t = step_s * np.arange(1, steps + 1)
+    pos = start[None] + t[:, None, None] * velocity[None]
+    n = len(start)
+    return PedPrediction(pos[None], np.full(n, RADIUS), np.arange(n), np.ones(n, bool), current=start, step_s=step_s)
+
+
+def _search(**kw: float) -> ForesightSearch:
+    return ForesightSearch(ForesightConfig(**kw), speed_mps=1.2, robot_radius_m=RADIUS, wall_clearance_m=0.35)
+
+
+def _clear_of(path: np.ndarray, pred: PedPrediction, step_s: float, contact: float) -> float:
+    """The smallest distance less `contact` between the path (one point per step_s) and the walkers then."""
+    tracks, _ = person_tracks(pred, step_s, len(path) - 1)
+    return float((np.linalg.norm(tracks - path[:, None], axis=-1) - contact).min())
+
+
+def test_free_straight_run_returns_the_target_itself() -> None:
+    far = _walkers(np.array([[0.0, -8.0]]), np.array([[0.0, -1.0]]))  # walking away behind the robot
+    s = _search()
+    target = np.array([10.0, 0.0])
+    assert np.array_equal(s.subgoal(np.zeros(2), target, far, None), target)
+    assert s.last_path is None
+    assert np.array_equal(s.subgoal(np.zeros(2), target, None, None), target)
+
+
+def test_a_passing_file_is_waited_for_or_gone_round_and_the_way_keeps_clear() -> None:
+    # a file of 8 walkers 0.8 m apart crossing the robot's line 3 m ahead from right to left at 1 m/s
+    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
+    pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
+    s = _search()
+    target = np.array([6.0, 0.0])
+    sub = s.subgoal(np.zeros(2), target, pred, None)
+    assert s.last_path is not None and not np.array_equal(sub, target)
+    path = s.last_path
+    assert np.allclose(path[0], 0.0)
+    steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    assert steps.max() <= 1.2 * 0.85 * 0.4 + 0.15 * np.sqrt(2) + 1e-9  # the searched robot's speed, within a cell
+    # the way keeps the contact distance plus the margin (less a cell's half diagonal) at every step
+    assert _clear_of(path, pred, 0.4, 2 * RADIUS) >= 0.3 - 0.15 / np.sqrt(2) - 1e-9
+    # the straight run at full speed would have met the file
+    straight = np.minimum(1.2 * 0.4 * np.arange(len(path)), 6.0)[:, None] * np.array([1.0, 0.0])
+    assert _clear_of(straight, pred, 0.4, 2 * RADIUS) < 0
+    assert np.linalg.norm(path[-1] - target) < 1.5  # behind the file, most of the way there in the 10 s view
+
+
+def test_the_way_keeps_out_of_walls() -> None:
+    # a wall across the straight line with a gap at y in [1.5, 3]; a walker blocks the straight run too
+    walls = np.array([[4.0, -5.0, 4.0, 1.5], [4.0, 3.0, 4.0, 8.0]])
+    pred = _walkers(np.array([[2.0, 0.0]]), np.array([[0.0, 0.0]]))
+    s = _search()
+    s.subgoal(np.zeros(2), np.array([8.0, 0.0]), pred, walls)
+    assert s.last_path is not None
+    from planner.scene import point_segment_distances
+    assert point_segment_distances(s.last_path, walls).min() >= 0.35 - 1e-9
+
+
+def test_tracks_interpolate_then_hold_the_last_velocity() -> None:
+    pred = _walkers(np.array([[0.0, 0.0], [5.0, 1.0]]), np.array([[1.0, 0.0], [0.0, -0.5]]), steps=5)
+    tracks, spread = person_tracks(pred, 0.2, 40)  # 8 s from a 2 s prediction
+    expected = np.array([[0.0, 0.0], [5.0, 1.0]])[None] + 0.2 * np.arange(41)[:, None, None] * np.array(
+        [[1.0, 0.0], [0.0, -0.5]])[None]
+    assert np.allclose(tracks, expected)
+    assert np.allclose(spread, 0.0)
+
+
+def test_the_planner_heads_for_the_searched_point() -> None:
+    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
+    pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
+    cfg = MPCConfig(solver="ipopt", foresight=ForesightConfig())
+    result = MPCPlanner(cfg).plan(np.zeros(5), np.array([10.0, 0.0]), pred)
+    alone = _search().subgoal(np.zeros(2), np.array([10.0, 0.0]), pred, None)
+    assert np.allclose(result.subgoal, alone)
+
+
+@pytest.mark.parametrize("field,value", [("horizon_s", 0.0), ("step_s", -1.0), ("speed_fraction", 1.5),
+                                         ("clearance_m", -0.1), ("cell_m", float("nan")), ("horizon_s", 0.2)])
+def test_config_rejects_bad_values(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        ForesightConfig(**{field: value})
