@@ -161,8 +161,8 @@ def test_a_fine_env_step_is_strided_and_the_witness_still_holds_in_the_env() -> 
 
 
 def test_trace_back_walks_one_path_back_through_the_sets() -> None:
-    """`trace_back` (planner/foresight.py, which envs/evaluation/reachability.py uses): from a cell of the last set, the nearest
-    cell of each set before it within `pad` cells, in forward order."""
+    """`trace_back` (planner/foresight.py, which the bounds use): from a cell of the last set, the nearest cell of
+    each set before it within `pad` cells, in forward order."""
     from envs.evaluation.reachability import trace_back
 
     sets = [np.zeros((5, 5), bool) for _ in range(3)]
