@@ -182,9 +182,9 @@ def _nested_override(item: str, key: str, text: str, out: dict[str, Any]) -> dic
     base = out.get(outer) or NESTED[outer]()
     current = getattr(base, inner)
     try:
-        value = current if isinstance(current, tuple) else type(current)(text)
-        if isinstance(current, tuple) or isinstance(current, bool):
+        if isinstance(current, tuple) or (isinstance(current, bool) and text.lower() not in ("true", "false")):
             raise ValueError(text)
+        value = text.lower() == "true" if isinstance(current, bool) else type(current)(text)
     except ValueError as exc:
         raise ValueError(f"--mpc {item!r}: {text!r} is not a {type(current).__name__} this option can set") from exc
     return {outer: replace(base, **{inner: value})}

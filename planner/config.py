@@ -141,8 +141,8 @@ class ForesightConfig:
     horizon_s: float = 10.0  # how far the search looks; predictions shorter than this are extended (module docstring)
     step_s: float = 0.4  # time between the reachable sets (the predictor's step)
     cell_m: float = 0.15  # grid cell side
-    clearance_m: float = 0.3  # kept beyond robot radius + person radius from every person's sample mean (a search
-    # in which no set lives to the end is run again without it)
+    clearance_m: float = 0.3  # kept beyond robot radius + person radius from every person's sample mean
+    retry_without_margin: bool = True  # where no set lives to the end with clearance_m, search again without it
     speed_fraction: float = 0.85  # of the robot's top speed: the searched robot is slower, room to track its way
     spread_inflation: float = 0.5  # clearance added per metre of the samples' RMS spread about their mean, m/m
     max_inflation_m: float = 0.3  # cap on that inflation, m

@@ -63,15 +63,17 @@ class ForesightSearch:
         radii = np.asarray(prediction.radii, float)[np.asarray(prediction.mask, bool)]
         contact = radii + self.robot_radius_m + np.minimum(cfg.max_inflation_m, cfg.spread_inflation * spread)
         free = self._free_of_walls(xy, walls)
-        for margin in dict.fromkeys((cfg.clearance_m, 0.0)):  # the margin first; without it if no set lives
+        margins = (cfg.clearance_m, 0.0) if cfg.retry_without_margin else (cfg.clearance_m,)
+        for margin in dict.fromkeys(margins):  # the margin first; without it if no set lives to the end
             hit = disc_cells(xy[0, 0], cfg.cell_m, xy.shape[:2], tracks, contact + margin)  # (2n + 1, G0, G1)
             blocked = hit[2::2] | hit[1::2]  # step j: at j step_s and half a step before
             if self._straight_is_free(position, target, xy, free, blocked):
                 return target
             sets, end = self._reach(origin, xy, target, free, blocked)
-            if end is not None and (len(sets) == n + 1 or np.hypot(*(xy[end] - target)) < cfg.goal_reach_m):
+            lives = end is not None and (len(sets) == n + 1 or np.hypot(*(xy[end] - target)) < cfg.goal_reach_m)
+            if lives:
                 break
-        if end is None:
+        if end is None or not (lives or cfg.retry_without_margin):
             return target
         step_cells = int(math.ceil(self._speed * cfg.step_s / cfg.cell_m)) + 1
         path = trace_back(sets, end, step_cells)
