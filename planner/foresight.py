@@ -173,21 +173,28 @@ def person_tracks(prediction: PedPrediction, step_s: float, n_steps: int) -> tup
 def disc_cells(origin: np.ndarray, h: float, shape: tuple[int, int], centres: np.ndarray,
                clear: np.ndarray) -> np.ndarray:
     """(..., G0, G1) bool: the cells of the grid with centres origin + (i, j) h (m) whose centre is closer than
-    clear[..., s] (m) to centres[..., s, :] (..., S, 2) m; one stencil for all discs, vectorised."""
+    clear[..., s] (m) to centres[..., s, :] (..., S, 2) m; one stencil for all discs, vectorised (on a grid padded by
+    twice the stencil, so that no index needs a bounds check)."""
     centres, clear = np.asarray(centres, float), np.asarray(clear, float)
-    out = np.zeros((*centres.shape[:-2], *shape), bool)
+    lead = centres.shape[:-2]
     if centres.shape[-2] == 0 or float(clear.max()) <= 0:
-        return out
+        return np.zeros((*lead, *shape), bool)
     k = int(math.ceil(float(clear.max()) / h)) + 1
     r = np.arange(-k, k + 1)
-    stencil = np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)  # (M, 2)
-    idx = np.floor((centres - origin) / h).astype(int)[..., None, :] + stencil  # (..., S, M, 2)
-    gap = origin + idx * h - centres[..., None, :]
-    hit = (np.hypot(gap[..., 0], gap[..., 1]) < clear[..., None]) & np.all(idx >= 0, axis=-1) \
-        & np.all(idx < np.array(shape), axis=-1)
-    where = np.nonzero(hit)
-    out[(*where[:-2], idx[hit][:, 0], idx[hit][:, 1])] = True
-    return out
+    cell = np.floor((centres - origin) / h)  # (..., S, 2): the cell below-left of each centre
+    off = origin + cell * h - centres  # (..., S, 2) m: that cell's centre from the disc's centre
+    d2 = (off[..., 0, None, None] + h * r[:, None]) ** 2 + (off[..., 1, None, None] + h * r) ** 2  # (..., S, M0, M1)
+    hit = d2 < clear[..., None, None] ** 2
+    inside = np.all((cell > -k - 1) & (cell < np.array(shape) + k), axis=-1)  # discs that may touch the grid
+    hit &= inside[..., None, None]
+    where = np.nonzero(hit)  # (..., s, a, b)
+    ci = cell.astype(int)
+    pos = tuple(where[:-3])
+    row = ci[(*pos, where[-3], 0)] + r[where[-2]] + 2 * k
+    col = ci[(*pos, where[-3], 1)] + r[where[-1]] + 2 * k
+    padded = np.zeros((*lead, shape[0] + 4 * k, shape[1] + 4 * k), bool)
+    padded[(*pos, row, col)] = True
+    return padded[..., 2 * k:2 * k + shape[0], 2 * k:2 * k + shape[1]]
 
 
 def trace_back(sets: list[np.ndarray], end: tuple[int, ...], pad: int) -> list[tuple[int, ...]]:
