@@ -94,3 +94,17 @@ def test_the_planner_heads_for_the_searched_point() -> None:
 def test_config_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         ForesightConfig(**{field: value})
+
+
+def test_disc_cells_match_a_brute_force_check_on_and_off_the_grid() -> None:
+    from planner.foresight import disc_cells
+
+    rng = np.random.default_rng(3)
+    origin, h, shape = np.array([-2.0, 1.0]), 0.15, (30, 20)
+    centres = rng.uniform([-6.0, -3.0], [6.0, 8.0], size=(4, 9, 2))  # (T, S, 2), some far off the grid
+    clear = rng.uniform(0.3, 1.0, size=(4, 9))
+    got = disc_cells(origin, h, shape, centres, clear)
+    xy = origin + h * np.stack(np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij"), axis=-1)
+    d = np.linalg.norm(xy[None, None] - centres[:, :, None, None], axis=-1)  # (T, S, G0, G1)
+    assert np.array_equal(got, np.any(d < clear[:, :, None, None], axis=1))
+    assert got.any() and not got.all()
