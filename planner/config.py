@@ -147,7 +147,7 @@ class ForesightConfig:
     spread_inflation: float = 0.5  # clearance added per metre of the samples' RMS spread about their mean, m/m
     max_inflation_m: float = 0.3  # cap on that inflation, m
     goal_reach_m: float = 0.5  # a reachable cell this near the target ends the search
-    lead_s: float = 1.6  # the subgoal is the searched path's point this far ahead
+    lead_s: float = 4.0  # the subgoal is the searched path's point this far ahead (the MPC's horizon: 1.6 s slowed it)
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))

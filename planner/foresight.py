@@ -10,14 +10,16 @@ against the prediction:
 1. Tracks: each person's sample mean at every half `step_s` up to `horizon_s` (linear between the prediction's
    steps; past its end, its last step's velocity held: constant velocity). Clearance: robot radius + person radius
    + `clearance_m` + `spread_inflation` x the samples' RMS spread about their mean (capped at `max_inflation_m`).
-2. A grid of side `cell_m` over the box around robot and target (3 m beyond both), clipped to the robot's reach in
-   `horizon_s`; cells nearer a wall than the MPC's wall clearance are never free.
-3. Reachable sets: from the robot's cell, each step grown by the robot's top speed x `step_s` (a disc of cells) and
+2. A grid of side `cell_m` over the box around robot and target (3 m beyond both), clipped to how far the searched
+   robot (`speed_fraction` of the top speed: room to track its way) gets in `horizon_s`; cells nearer a wall than
+   the MPC's wall clearance are never free.
+3. Reachable sets: from the robot's cell, each step grown by the searched speed x `step_s` (a disc of cells) and
    cut to the cells free of everyone at that step and half a step before (people move up to 0.6 m in 0.4 s).
-4. If the straight run at full speed to the target stays free (point by point at the sets' times) the target is the
-   subgoal: the MPC as without the search. Else the first set holding a cell within `goal_reach_m` of the target,
-   or if none does the last set alive, gives the cell nearest the target; one path back through the sets to the
-   start; its point `lead_s` ahead is the subgoal (the way round, or a place to wait).
+4. If the straight run to the target stays free (point by point at the sets' times) the target is the subgoal: the
+   MPC as without the search. Else the first set holding a cell within `goal_reach_m` of the target, or the last
+   set alive, gives the cell nearest the target; one path back through the sets to the start; its point `lead_s`
+   ahead is the subgoal (the way round, or a place to wait). Where no set lives to the end (or to the target) with
+   `clearance_m`, the search runs again at contact distance (`retry_without_margin`; else the target).
 5. Nothing alive after the first step, or nobody predicted: the target (the MPC and the shield handle it).
 
 Units: metres, seconds. numpy and scipy (imported on first use); stateless apart from `last_path`, the searched path
