@@ -262,6 +262,13 @@ def oracle_prediction(view: PolicyView) -> PedPrediction:
                          history=view.history, step_s=t.step_s)
 
 
+def oracle_future_s(config: MPCConfig) -> float:
+    """How far ahead (s) an oracle policy reads the true future: the MPC's whole horizon, however long (--mpc), and
+    the foresight search's view where that is longer."""
+    horizon = config.horizon_steps * config.dt_s
+    return horizon if config.foresight is None else max(horizon, config.foresight.horizon_s)
+
+
 class OraclePolicy(PlannerPolicy):
     """`mpc-oracle`: the MPC of mpc-gpgraph fed the true future instead of a prediction (a reference, not a deployable
     policy: it reads `view.future`, which the env computes for it alone; its plan time is reported, not budgeted)."""
@@ -270,9 +277,7 @@ class OraclePolicy(PlannerPolicy):
 
     def __init__(self, config: MPCConfig, replan_every_steps: int = REPLAN_EVERY_STEPS) -> None:
         super().__init__("mpc-oracle", MPCPlanner(config), oracle_prediction, replan_every_steps)
-        self.future_s = config.horizon_steps * config.dt_s  # the whole horizon known, however long (--mpc)
-        if config.foresight is not None:  # and the foresight search's view
-            self.future_s = max(self.future_s, config.foresight.horizon_s)
+        self.future_s = oracle_future_s(config)
 
 
 class HalfOraclePolicy(GPGraphPolicy):
@@ -289,6 +294,7 @@ class HalfOraclePolicy(GPGraphPolicy):
             raise ValueError(f"unknown half {half!r}; valid: {', '.join(self.HALVES)}")
         super().__init__(config, predictor, n_samples, threads, replan_every_steps, env_timing)
         self.half, self.name, self.reads_future = half, f"mpc-oracle-{half}", half == "paths"
+        self.future_s = oracle_future_s(config) if self.reads_future else 0.0
         self._predict = self._half_truth
 
     def _half_truth(self, view: PolicyView) -> PedPrediction:

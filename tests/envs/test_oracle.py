@@ -163,3 +163,21 @@ def test_an_oracle_that_plans_farther_than_the_predictor_sees_its_whole_horizon(
     far.reset(0)
     decision = far.act(far_view)
     assert decision.predictions.shape[1] == 30 and decision.plan.shape == (31, 2)
+
+
+def test_the_oracles_read_as_far_as_the_foresight_search_looks():
+    """With the foresight search (planner/foresight.py) on, mpc-oracle and mpc-oracle-paths read the true future over
+    its whole view (10 s), not only the MPC's 4 s horizon; mpc-oracle-groups reads none."""
+    from envs.policies import PolicyConfig
+    from envs.policies.registry import ENV_MPC, oracle_future_s
+    from planner import ForesightConfig
+
+    seeing = replace(ENV_MPC, foresight=ForesightConfig(horizon_s=10.0))
+    assert oracle_future_s(ENV_MPC) == pytest.approx(4.0) and oracle_future_s(seeing) == pytest.approx(10.0)
+    assert oracle_future_s(replace(seeing, horizon_steps=30)) == pytest.approx(12.0)  # the longer of the two
+    env = CrowdNavEnv(CrowdNavConfig(scenario="corridor", n_pedestrians=10, robot_visible=False))
+    env.reset(seed=2)
+    assert make_policy(PolicyConfig("mpc-oracle", mpc=seeing), env).future_s == pytest.approx(10.0)
+    paths = make_policy(PolicyConfig("mpc-oracle-paths", mpc=seeing, predictor="constant-velocity"), env)
+    groups = make_policy(PolicyConfig("mpc-oracle-groups", mpc=seeing, predictor="constant-velocity"), env)
+    assert paths.future_s == pytest.approx(10.0) and not groups.reads_future
