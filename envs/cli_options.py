@@ -137,7 +137,9 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
                    help="torch threads per process (mpc-gpgraph, ppo-crowdnav agents, sb3: agents, plug-ins)")
     p.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE",
                    help="override an MPCConfig field of the MPC policies (repeatable), e.g. safety_margin_m=0.4; on "
-                   "top of the benchmark suite's planner defaults, if it has any (crowdnav suites lists them)")
+                   "top of the benchmark suite's planner defaults, if it has any (crowdnav suites lists them); a "
+                   "nested config (route, guidance, foresight) takes none or default, or one field as "
+                   "NESTED.FIELD=VALUE, e.g. foresight.horizon_s=6")
 
 
 def add_backend_options(p: argparse.ArgumentParser) -> None:
