@@ -183,13 +183,9 @@ def _nested_override(item: str, key: str, text: str, out: dict[str, Any]) -> dic
         raise ValueError(unknown_name(f"--mpc {outer} field", inner, valid))
     base = out.get(outer) or NESTED[outer]()
     current = getattr(base, inner)
-    try:
-        if isinstance(current, tuple) or (isinstance(current, bool) and text.lower() not in ("true", "false")):
-            raise ValueError(text)
-        value = text.lower() == "true" if isinstance(current, bool) else type(current)(text)
-    except ValueError as exc:
-        raise ValueError(f"--mpc {item!r}: {text!r} is not a {type(current).__name__} this option can set") from exc
-    return {outer: replace(base, **{inner: value})}
+    if isinstance(current, tuple):
+        raise ValueError(f"--mpc {item!r}: {outer}.{inner} is a tuple, which this option cannot set")
+    return {outer: replace(base, **{inner: _scalar(item, text, type(current))})}
 
 
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
@@ -203,7 +199,11 @@ def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
             raise ValueError(f"--mpc {item!r}: {key} is one of none, default")
         return NESTED[key]()
     current = getattr(ENV_MPC, key)
-    kind = float if current is None else type(current)
+    return _scalar(item, text, float if current is None else type(current))
+
+
+def _scalar(item: str, text: str, kind: type) -> Any:
+    """`text` as a value of `kind` (bool: true, false, 1 or 0); ValueError naming the --mpc `item` otherwise."""
     try:
         if kind is bool:
             if text.lower() not in ("true", "false", "1", "0"):

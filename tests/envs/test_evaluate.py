@@ -294,6 +294,11 @@ def test_a_nested_config_field_is_set_by_its_dotted_name():
         parse("foresigt.horizon_s=6")
     with pytest.raises(ValueError, match="is not a float"):
         parse("foresight.horizon_s=far")
+    assert parse("foresight.retry_without_margin=0").foresight.retry_without_margin is False  # as FIELD=VALUE reads
+    with pytest.raises(ValueError, match="is not a bool"):
+        parse("foresight.retry_without_margin=maybe")
+    with pytest.raises(ValueError, match="cannot set"):
+        parse("guidance.heading_offsets_deg=10")
 
 
 def test_every_registry_policy_states_the_flags_it_reads():
