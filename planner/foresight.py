@@ -107,7 +107,7 @@ class ForesightSearch:
 
     def _straight_is_free(self, position: np.ndarray, target: np.ndarray, xy: np.ndarray, free: np.ndarray,
                           blocked: np.ndarray) -> bool:
-        """Whether full speed straight at the target meets nobody at the sets' times until it arrives."""
+        """Whether the searched speed straight at the target meets nobody at the sets' times until it arrives."""
         cfg, h = self.config, self.config.cell_m
         dist = float(np.hypot(*(target - position)))
         u = (target - position) / max(dist, 1e-9)
@@ -125,23 +125,13 @@ class ForesightSearch:
     def _reach(self, origin: tuple[int, int], xy: np.ndarray, target: np.ndarray, free: np.ndarray,
                blocked: np.ndarray) -> tuple[list[np.ndarray], tuple[int, int] | None]:
         """The reachable sets (sets[0] the start) and the cell (a cell of sets[-1]) to trace back from."""
-        from scipy.ndimage import binary_dilation  # lazily: `import planner` stays numpy and casadi only
-
         cfg = self.config
-        r = self._speed * cfg.step_s / cfg.cell_m
-        k = int(math.floor(r))
-        disc = np.hypot(*np.mgrid[-k:k + 1, -k:k + 1]) <= r + 1e-9
         start = np.zeros(free.shape, bool)
         start[origin] = True
         goal_d = np.hypot(*(xy - target).transpose(2, 0, 1))
         sets = [start]
         for j in range(len(blocked)):
-            rows, cols = np.nonzero(sets[-1])
-            lo0, lo1 = max(rows.min() - k, 0), max(cols.min() - k, 0)
-            hi0, hi1 = rows.max() + k + 1, cols.max() + k + 1
-            grown = np.zeros_like(start)
-            grown[lo0:hi0, lo1:hi1] = binary_dilation(sets[-1][lo0:hi0, lo1:hi1], disc)
-            alive = grown & free & ~blocked[j]
+            alive = dilate(sets[-1], self._speed * cfg.step_s, cfg.cell_m) & free & ~blocked[j]
             if not alive.any():
                 break
             sets.append(alive)
@@ -197,6 +187,27 @@ def disc_cells(origin: np.ndarray, h: float, shape: tuple[int, int], centres: np
     padded = np.zeros((*lead, shape[0] + 4 * k, shape[1] + 4 * k), bool)
     padded[(*pos, row, col)] = True
     return padded[..., 2 * k:2 * k + shape[0], 2 * k:2 * k + shape[1]]
+
+
+def distance_to_marked(mask: np.ndarray, radius_m: float, h: float) -> np.ndarray:
+    """Distance (m) from each cell centre (cells of side h m) to the nearest marked centre (exact Euclidean), computed
+    on the marked cells' bounding box grown by radius_m; inf outside that box or with nothing marked."""
+    from scipy.ndimage import distance_transform_edt  # lazily: `import planner` stays numpy and casadi only
+
+    out = np.full(mask.shape, np.inf)
+    idx = np.argwhere(mask)
+    if len(idx) == 0:
+        return out
+    pad = int(math.ceil(radius_m / h)) + 1
+    lo = np.maximum(idx.min(axis=0) - pad, 0)
+    hi = np.minimum(idx.max(axis=0) + pad + 1, mask.shape)
+    out[lo[0]:hi[0], lo[1]:hi[1]] = distance_transform_edt(~mask[lo[0]:hi[0], lo[1]:hi[1]], sampling=h)
+    return out
+
+
+def dilate(mask: np.ndarray, radius_m: float, h: float) -> np.ndarray:
+    """Cells whose centre lies within radius_m of a marked centre (cells of side h m)."""
+    return distance_to_marked(mask, radius_m, h) <= radius_m + 1e-9
 
 
 def trace_back(sets: list[np.ndarray], end: tuple[int, ...], pad: int) -> list[tuple[int, ...]]:

@@ -34,13 +34,14 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from envs.config import REPLAY_SCENARIO, CrowdNavConfig
 from envs.env import CrowdNavEnv
 from envs.scoring.collisions import SPAWN_WINDOW_S
 from planner import point_segment_distances
-from planner.foresight import trace_back  # the bounds' witness and the planner's foresight search trace alike
+from planner.foresight import dilate as _dilate  # the bounds and the planner's foresight search grow and trace alike
+from planner.foresight import distance_to_marked as _distance
+from planner.foresight import trace_back
 
 VERDICTS = ("infeasible", "feasible", "open")
 DEFAULT_CHECK_S = 0.2  # the optimistic set's check period by default: the smallest multiple of the env step >= this
@@ -200,25 +201,6 @@ class _Grid:
             sub = self.xy[lo[0]:hi[0], lo[1]:hi[1]]
             out[lo[0]:hi[0], lo[1]:hi[1]] |= np.hypot(sub[..., 0] - p[0], sub[..., 1] - p[1]) < c
         return out
-
-
-def _distance(mask: np.ndarray, radius_m: float, h: float) -> np.ndarray:
-    """Distance (m) from each cell centre to the nearest marked centre (exact Euclidean), computed on the marked
-    cells' bounding box grown by radius_m; inf outside that box or with nothing marked."""
-    out = np.full(mask.shape, np.inf)
-    idx = np.argwhere(mask)
-    if len(idx) == 0:
-        return out
-    pad = int(math.ceil(radius_m / h)) + 1
-    lo = np.maximum(idx.min(axis=0) - pad, 0)
-    hi = np.minimum(idx.max(axis=0) + pad + 1, mask.shape)
-    out[lo[0]:hi[0], lo[1]:hi[1]] = distance_transform_edt(~mask[lo[0]:hi[0], lo[1]:hi[1]], sampling=h)
-    return out
-
-
-def _dilate(mask: np.ndarray, radius_m: float, h: float) -> np.ndarray:
-    """Cells whose centre lies within radius_m of a marked centre."""
-    return _distance(mask, radius_m, h) <= radius_m + 1e-9
 
 
 def _optimistic(course: Course, grid: _Grid, every: int) -> float | None:
