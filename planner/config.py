@@ -133,6 +133,9 @@ class GuidanceConfig:
             raise ValueError(f"GuidanceConfig.hold_discount must be in [0, 1), got {self.hold_discount!r}")
 
 
+ON_RETREAT = ("target", "hold")  # ForesightConfig.on_retreat
+
+
 @dataclass(frozen=True)
 class ForesightConfig:
     """Settings of the foresight search (planner/foresight.py): reachable sets over a long view against the predicted
@@ -148,6 +151,11 @@ class ForesightConfig:
     max_inflation_m: float = 0.3  # cap on that inflation, m
     goal_reach_m: float = 0.5  # a reachable cell this near the target ends the search
     lead_s: float = 4.0  # the subgoal is the searched path's point this far ahead (the MPC's horizon: 1.6 s slowed it)
+    # a subgoal farther than this from the target than the robot is (the search backs away from a flow) is not
+    # taken; inf: always taken. on_retreat: what is taken instead, "target" (the MPC as without the search) or
+    # "hold" (the robot's own position: wait where it is)
+    retreat_m: float = math.inf
+    on_retreat: str = "target"
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))
@@ -158,6 +166,11 @@ class ForesightConfig:
                      "goal_reach_m", "lead_s"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"ForesightConfig.{name} must be finite, got {getattr(self, name)!r}")
+        if not self.retreat_m >= 0:
+            raise ValueError(f"ForesightConfig.retreat_m must be >= 0 (inf: off), got {self.retreat_m!r}")
+        if self.on_retreat not in ON_RETREAT:
+            raise ValueError(f"ForesightConfig.on_retreat must be one of {', '.join(ON_RETREAT)}, "
+                             f"got {self.on_retreat!r}")
         if self.horizon_s < self.step_s:
             raise ValueError(f"ForesightConfig.horizon_s must be >= step_s, got {self.horizon_s} < {self.step_s}")
 

@@ -50,12 +50,20 @@ class ForesightSearch:
         self.robot_radius_m = float(robot_radius_m)
         self.wall_clearance_m = float(wall_clearance_m)
         self.last_path: np.ndarray | None = None
+        self.nearest_m = math.inf  # the nearest the robot has come to its target since `reset` (retreat_m)
+
+    def reset(self) -> None:
+        """Forget the episode: the nearest approach to the target."""
+        self.nearest_m, self.last_path = math.inf, None
 
     def subgoal(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
-                walls: np.ndarray | None) -> np.ndarray:
-        """The point (2,) m to head for from position (2,) towards target (2,), or the target itself."""
+                walls: np.ndarray | None, goal: np.ndarray | None = None) -> np.ndarray:
+        """The point (2,) m to head for from position (2,) towards target (2,), or the target itself. goal (2,) m:
+        the episode's goal where target is a waypoint to it (the route's), for `retreat_m`; default target."""
         self.last_path = None
         position, target = np.asarray(position, float), np.asarray(target, float)
+        goal = target if goal is None else np.asarray(goal, float)
+        self.nearest_m = min(self.nearest_m, float(np.hypot(*(position - goal))))
         if prediction is None or not np.any(prediction.mask):
             return target
         cfg = self.config
@@ -83,7 +91,10 @@ class ForesightSearch:
         lead = int(round(cfg.lead_s / cfg.step_s))
         if lead >= len(path) - 1 and np.hypot(*(self.last_path[-1] - target)) < cfg.goal_reach_m:
             return target
-        return self.last_path[min(lead, len(path) - 1)]
+        subgoal = self.last_path[min(lead, len(path) - 1)]
+        if np.hypot(*(subgoal - goal)) > self.nearest_m + cfg.retreat_m:
+            return target if cfg.on_retreat == "target" else position
+        return subgoal
 
     @property
     def _speed(self) -> float:

@@ -117,6 +117,8 @@ class MPCPlanner:
         self._sides, self._options = {}, []
         if self.router is not None:
             self.router.reset()
+        if self.foresight is not None:
+            self.foresight.reset()
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
              obstacles: np.ndarray | list | None = None) -> PlanResult:
@@ -152,7 +154,7 @@ class MPCPlanner:
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
         if self.foresight is not None:
-            subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles)
+            subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles, goal)
         return subgoal
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:

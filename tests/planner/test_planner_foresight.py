@@ -84,14 +84,54 @@ def test_the_planner_heads_for_the_searched_point() -> None:
     start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
     pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
     cfg = MPCConfig(solver="ipopt", foresight=ForesightConfig())
-    result = MPCPlanner(cfg).plan(np.zeros(5), np.array([10.0, 0.0]), pred)
+    planner = MPCPlanner(cfg)
+    result = planner.plan(np.zeros(5), np.array([10.0, 0.0]), pred)
     alone = _search().subgoal(np.zeros(2), np.array([10.0, 0.0]), pred, None)
     assert np.allclose(result.subgoal, alone)
+    assert planner.foresight.nearest_m == pytest.approx(10.0)
+    planner.reset()  # a new episode: the nearest approach is forgotten
+    assert planner.foresight.nearest_m == np.inf
+
+
+def _oncoming_line() -> PedPrediction:
+    """A line of walkers 0.5 m apart across y in [-7, 7], 2.5 m ahead of the robot, walking at it at 0.6 m/s: no way
+    through or round within the view, so the search backs away before it."""
+    y = np.arange(-7.0, 7.01, 0.5)
+    return _walkers(np.stack([np.full(len(y), 2.5), y], axis=1), np.tile([-0.6, 0.0], (len(y), 1)))
+
+
+def test_a_retreat_past_the_nearest_approach_is_replaced_and_the_nearest_approach_is_per_episode() -> None:
+    target, line = np.array([10.0, 0.0]), _oncoming_line()
+    free = _search()
+    backing = free.subgoal(np.zeros(2), target, line, None)
+    assert backing[0] < -1.0  # unbounded, the search backs away from the line
+    held = _search(retreat_m=0.5, on_retreat="hold")
+    assert np.array_equal(held.subgoal(np.zeros(2), target, line, None), np.zeros(2))
+    assert held.last_path is not None  # the search ran; its subgoal was not taken
+    given = _search(retreat_m=0.5, on_retreat="target")
+    assert np.array_equal(given.subgoal(np.zeros(2), target, line, None), target)
+    # the bound is the nearest approach so far: from 3 m farther back, a retreat of 2 m is past it ...
+    behind = np.array([-3.0, 0.0])
+    assert np.array_equal(held.subgoal(behind, target, _oncoming_line(), None), behind)
+    # ... and after reset (a new episode) it is measured from there again: backing away 2 m is within 2.5 m
+    held2 = _search(retreat_m=2.5, on_retreat="hold")
+    held2.nearest_m = 1.0
+    assert np.array_equal(held2.subgoal(behind, target, line, None), behind)
+    held2.reset()
+    assert held2.subgoal(behind, target, line, None)[0] < behind[0]
+
+
+def test_the_retreat_is_measured_from_the_episode_goal_not_the_waypoint() -> None:
+    line = _oncoming_line()
+    s = _search(retreat_m=0.5, on_retreat="hold")
+    waypoint, goal = np.array([10.0, 0.0]), np.array([-20.0, 0.0])  # the goal lies behind: backing away is progress
+    assert s.subgoal(np.zeros(2), waypoint, line, None, goal=goal)[0] < -1.0
 
 
 @pytest.mark.parametrize("field,value", [("horizon_s", 0.0), ("step_s", -1.0), ("speed_fraction", 1.5),
-                                         ("clearance_m", -0.1), ("cell_m", float("nan")), ("horizon_s", 0.2)])
-def test_config_rejects_bad_values(field: str, value: float) -> None:
+                                         ("clearance_m", -0.1), ("cell_m", float("nan")), ("horizon_s", 0.2),
+                                         ("retreat_m", -1.0), ("retreat_m", float("nan")), ("on_retreat", "back")])
+def test_config_rejects_bad_values(field: str, value: float | str) -> None:
     with pytest.raises(ValueError, match=field):
         ForesightConfig(**{field: value})
 
