@@ -133,9 +133,6 @@ class GuidanceConfig:
             raise ValueError(f"GuidanceConfig.hold_discount must be in [0, 1), got {self.hold_discount!r}")
 
 
-ON_RETREAT = ("target", "hold")  # ForesightConfig.on_retreat
-
-
 @dataclass(frozen=True)
 class ForesightConfig:
     """Settings of the foresight search (planner/foresight.py): reachable sets over a long view against the predicted
@@ -151,11 +148,9 @@ class ForesightConfig:
     max_inflation_m: float = 0.3  # cap on that inflation, m
     goal_reach_m: float = 0.5  # a reachable cell this near the target ends the search
     lead_s: float = 4.0  # the subgoal is the searched path's point this far ahead (the MPC's horizon: 1.6 s slowed it)
-    # a subgoal farther than this from the target than the robot is (the search backs away from a flow) is not
-    # taken; inf: always taken. on_retreat: what is taken instead, "target" (the MPC as without the search) or
-    # "hold" (the robot's own position: wait where it is)
-    retreat_m: float = math.inf
-    on_retreat: str = "target"
+    # a subgoal farther from the goal than the nearest the robot has come to it (this episode) plus this is not
+    # taken: the robot holds where it is instead of backing away with an oncoming flow; inf: no bound
+    retreat_m: float = 2.0
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))
@@ -168,9 +163,6 @@ class ForesightConfig:
                 raise ValueError(f"ForesightConfig.{name} must be finite, got {getattr(self, name)!r}")
         if not self.retreat_m >= 0:
             raise ValueError(f"ForesightConfig.retreat_m must be >= 0 (inf: off), got {self.retreat_m!r}")
-        if self.on_retreat not in ON_RETREAT:
-            raise ValueError(f"ForesightConfig.on_retreat must be one of {', '.join(ON_RETREAT)}, "
-                             f"got {self.on_retreat!r}")
         if self.horizon_s < self.step_s:
             raise ValueError(f"ForesightConfig.horizon_s must be >= step_s, got {self.horizon_s} < {self.step_s}")
 

@@ -21,9 +21,14 @@ against the prediction:
    ahead is the subgoal (the way round, or a place to wait). Where no set lives to the end (or to the target) with
    `clearance_m`, the search runs again at contact distance (`retry_without_margin`; else the target).
 5. Nothing alive after the first step, or nobody predicted: the target (the MPC and the shield handle it).
+6. A subgoal farther from the goal than the nearest the robot has come to it in this episode plus `retreat_m` is
+   not taken: the robot holds where it is. In a corridor's oncoming flow the sets are pushed back by everyone walking
+   at the robot, and the search would have it walk back with them for good (crowdnav-tune corridor-high-visible 1002:
+   from 8.8 m to 16 m from the goal); a step back to let a crossing file pass stays within the bound.
 
-Units: metres, seconds. numpy and scipy (imported on first use); stateless apart from `last_path`, the searched path
-(P, 2) m of the last call (None when the target was returned without one), for drawing.
+Units: metres, seconds. numpy and scipy (imported on first use); its state is `last_path`, the searched path (P, 2) m
+of the last call (None when the target was returned without one), for drawing, and `nearest_m`, the nearest approach
+to the goal since `reset` (a new episode).
 """
 
 from __future__ import annotations
@@ -93,7 +98,7 @@ class ForesightSearch:
             return target
         subgoal = self.last_path[min(lead, len(path) - 1)]
         if np.hypot(*(subgoal - goal)) > self.nearest_m + cfg.retreat_m:
-            return target if cfg.on_retreat == "target" else position
+            return position  # hold: backing away with an oncoming flow loses the ground gained (module docstring)
         return subgoal
 
     @property

@@ -102,19 +102,17 @@ def _oncoming_line() -> PedPrediction:
 
 def test_a_retreat_past_the_nearest_approach_is_replaced_and_the_nearest_approach_is_per_episode() -> None:
     target, line = np.array([10.0, 0.0]), _oncoming_line()
-    free = _search()
+    free = _search(retreat_m=float("inf"))
     backing = free.subgoal(np.zeros(2), target, line, None)
     assert backing[0] < -1.0  # unbounded, the search backs away from the line
-    held = _search(retreat_m=0.5, on_retreat="hold")
+    held = _search(retreat_m=0.5)
     assert np.array_equal(held.subgoal(np.zeros(2), target, line, None), np.zeros(2))
     assert held.last_path is not None  # the search ran; its subgoal was not taken
-    given = _search(retreat_m=0.5, on_retreat="target")
-    assert np.array_equal(given.subgoal(np.zeros(2), target, line, None), target)
     # the bound is the nearest approach so far: from 3 m farther back, a retreat of 2 m is past it ...
     behind = np.array([-3.0, 0.0])
     assert np.array_equal(held.subgoal(behind, target, _oncoming_line(), None), behind)
     # ... and after reset (a new episode) it is measured from there again: backing away 2 m is within 2.5 m
-    held2 = _search(retreat_m=2.5, on_retreat="hold")
+    held2 = _search(retreat_m=2.5)
     held2.nearest_m = 1.0
     assert np.array_equal(held2.subgoal(behind, target, line, None), behind)
     held2.reset()
@@ -123,15 +121,15 @@ def test_a_retreat_past_the_nearest_approach_is_replaced_and_the_nearest_approac
 
 def test_the_retreat_is_measured_from_the_episode_goal_not_the_waypoint() -> None:
     line = _oncoming_line()
-    s = _search(retreat_m=0.5, on_retreat="hold")
+    s = _search(retreat_m=0.5)
     waypoint, goal = np.array([10.0, 0.0]), np.array([-20.0, 0.0])  # the goal lies behind: backing away is progress
     assert s.subgoal(np.zeros(2), waypoint, line, None, goal=goal)[0] < -1.0
 
 
 @pytest.mark.parametrize("field,value", [("horizon_s", 0.0), ("step_s", -1.0), ("speed_fraction", 1.5),
                                          ("clearance_m", -0.1), ("cell_m", float("nan")), ("horizon_s", 0.2),
-                                         ("retreat_m", -1.0), ("retreat_m", float("nan")), ("on_retreat", "back")])
-def test_config_rejects_bad_values(field: str, value: float | str) -> None:
+                                         ("retreat_m", -1.0), ("retreat_m", float("nan"))])
+def test_config_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         ForesightConfig(**{field: value})
 
