@@ -17,6 +17,7 @@ collisions with its members included); goals reached.
     python bench/bench_planner.py --quick    # 40 steps per configuration
     python bench/bench_planner.py --crowd    # the env's planner.CROWD_MPC at max_peds 8 and 12, side by side
     python bench/bench_planner.py --guidance # CROWD_MPC without and with the guidance layer (1 and 2 paths)
+    python bench/bench_planner.py --foresight # CROWD_MPC without and with the foresight search
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planner import CROWD_MPC, GuidanceConfig, MPCConfig, MPCPlanner, PedPrediction, step_robot
+from planner import CROWD_MPC, ForesightConfig, GuidanceConfig, MPCConfig, MPCPlanner, PedPrediction, step_robot
 
 HALL_M = np.array([[-2.0, -5.0], [14.0, 5.0]])  # lower-left, upper-right corners
 GOALS = np.array([[0.0, 0.0], [12.0, 0.0]])
@@ -131,7 +132,8 @@ def run_case(solver: str, n_peds: int, k: int, steps: int, seed: int,
     wall_ms, cpu_ms = np.array(wall) * 1e3, np.array(cpu) * 1e3
     return {"solver": solver, "peds": n_peds, "K": k, "steps": steps, "p50": summary.get("p50_ms", np.nan),
             "p95": summary.get("p95_ms", np.nan), "max": summary.get("max_ms", np.nan),
-            "plan_p50": float(np.percentile(wall_ms, 50)), "cpu_p50": float(np.percentile(cpu_ms, 50)),
+            "plan_p50": float(np.percentile(wall_ms, 50)), "plan_p95": float(np.percentile(wall_ms, 95)),
+            "cpu_p50": float(np.percentile(cpu_ms, 50)),
             "cpu_p95": float(np.percentile(cpu_ms, 95)), "misses": int((wall_ms > cfg.dt_s * 1e3).sum()),
             "fallback": 100 * summary["fallback_rate"], "collisions": collisions, "intrusions": intrusions,
             "goals": goals}
@@ -165,22 +167,27 @@ def crowd_comparison(steps: int, seed: int) -> None:
               f"| {a['collisions']} / {b['collisions']} |", flush=True)
 
 
-def guidance_comparison(steps: int, seed: int) -> None:
-    """planner.CROWD_MPC without the guidance layer and with it (1 and 2 guided solves beside the free one), side by
-    side on the same crowds: plan() CPU p50/p95 and their ratio to CROWD_MPC."""
-    print(f"CROWD_MPC (fatrop, K = {CROWD_MPC.n_modes}, shield on) without / with guidance, {steps} steps, seed {seed}")
+LAYERS = {  # --guidance / --foresight: CROWD_MPC against itself with the opt-in layer, side by side
+    "guidance": {"+ guidance, 1 path": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=1)),
+                 "+ guidance, 2 paths": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=2))},
+    "foresight": {"+ foresight": replace(CROWD_MPC, foresight=ForesightConfig())},
+}
+
+
+def layer_comparison(layer: str, steps: int, seed: int) -> None:
+    """planner.CROWD_MPC without and with an opt-in layer (`LAYERS`), side by side on the same crowds: plan() CPU
+    p50/p95 and their ratio to CROWD_MPC."""
+    print(f"CROWD_MPC (fatrop, K = {CROWD_MPC.n_modes}, shield on) without / with {layer}, {steps} steps, seed {seed}")
     print("| peds | config | plan() CPU p50 / p95 ms | ratio p50 / p95 | plan() wall p95 ms | steps in collision "
           "| goals |")
     print("|---|---|---|---|---|---|---|")
-    configs = {"CROWD_MPC": CROWD_MPC,
-               "+ guidance, 1 path": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=1)),
-               "+ guidance, 2 paths": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=2))}
+    configs = {"CROWD_MPC": CROWD_MPC, **LAYERS[layer]}
     for n_peds in (20, 40, 60):
         rows = {name: run_case("fatrop", n_peds, cfg.n_modes, steps, seed, cfg) for name, cfg in configs.items()}
         ref = rows["CROWD_MPC"]
         for name, r in rows.items():
             print(f"| {n_peds} | {name} | {r['cpu_p50']:.1f} / {r['cpu_p95']:.1f} | {r['cpu_p50'] / ref['cpu_p50']:.2f}"
-                  f" / {r['cpu_p95'] / ref['cpu_p95']:.2f} | {r['p95']:.1f} | {r['collisions']} | {r['goals']} |",
+                  f" / {r['cpu_p95'] / ref['cpu_p95']:.2f} | {r['plan_p95']:.1f} | {r['collisions']} | {r['goals']} |",
                   flush=True)
 
 
@@ -191,11 +198,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--crowd", action="store_true", help="only the CROWD_MPC max_peds 8 vs 12 comparison")
     parser.add_argument("--guidance", action="store_true", help="only CROWD_MPC without / with the guidance layer")
+    parser.add_argument("--foresight", action="store_true", help="only CROWD_MPC without / with the foresight search")
     args = parser.parse_args(argv)
     steps = 40 if args.quick else args.steps
-    if args.guidance:
-        guidance_comparison(steps, args.seed)
-        return
+    for layer in LAYERS:
+        if getattr(args, layer):
+            layer_comparison(layer, steps, args.seed)
+            return
     if args.crowd:
         crowd_comparison(steps, args.seed)
         return
