@@ -55,10 +55,10 @@ class ForesightSearch:
         self.robot_radius_m = float(robot_radius_m)
         self.wall_clearance_m = float(wall_clearance_m)
         self.last_path: np.ndarray | None = None
-        self.nearest_m = math.inf  # the nearest the robot has come to its target since `reset` (retreat_m)
+        self.nearest_m = math.inf  # the nearest the robot has come to its goal since `reset` (retreat_m)
 
     def reset(self) -> None:
-        """Forget the episode: the nearest approach to the target."""
+        """Forget the episode: the nearest approach to the goal."""
         self.nearest_m, self.last_path = math.inf, None
 
     def subgoal(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
@@ -183,8 +183,8 @@ def disc_cells(origin: np.ndarray, h: float, shape: tuple[int, int], centres: np
     """(..., G0, G1) bool: the cells of the grid with centres origin + (i, j) h (m) whose centre is closer than
     clear[..., s] (m) to centres[..., s, :] (..., S, 2) m. By scanlines: for each disc and each grid row its stencil
     crosses, the run of columns inside it (from the row's half-width), marked at its two ends in a difference array
-    whose running sum along the row fills it; vectorised over all discs (9x the speed of marking every stencil cell
-    on the search's grids, the same cells on 200 random cases)."""
+    whose running sum along the row fills it; vectorised over all discs (6-9x the speed of marking every stencil cell
+    on the search's grids, the same cells on 500 random cases)."""
     centres, clear = np.asarray(centres, float), np.asarray(clear, float)
     lead, (g0, g1) = centres.shape[:-2], shape
     if centres.shape[-2] == 0 or float(clear.max()) <= 0:
@@ -192,7 +192,8 @@ def disc_cells(origin: np.ndarray, h: float, shape: tuple[int, int], centres: np
     n_lead = math.prod(lead)
     c = centres.reshape(n_lead, -1, 2)
     radius = np.broadcast_to(clear, centres.shape[:-1]).reshape(n_lead, -1)
-    r = np.arange(-(int(math.ceil(float(radius.max()) / h)) + 1), int(math.ceil(float(radius.max()) / h)) + 2)
+    k = int(math.ceil(float(radius.max()) / h)) + 1  # stencil rows each side of a centre's cell
+    r = np.arange(-k, k + 1)
     cell = np.floor((c - origin) / h)  # (L, S, 2): the cell below-left of each centre
     off = origin + cell * h - c  # (L, S, 2) m: that cell's centre from the disc's centre
     half2 = radius[..., None] ** 2 - (off[..., 0, None] + h * r) ** 2  # (L, S, M) m^2: each stencil row's half-width^2
