@@ -116,14 +116,16 @@ def _compile(name: str, plugin: str, nlp: dict, opts: dict, folder: Path, stem: 
     names = {"name": stem, "directory": f"{folder}{os.sep}", "temp_suffix": False, "cleanup": False}
     jit_opts = {"jit": True, "compiler": "shell", "jit_serialize": "link", "jit_name": stem, "jit_temp_suffix": False,
                 "jit_cleanup": False, "jit_options": {"flags": list(FLAGS), "verbose": False, **names}}
-    solver = ca.nlpsol(name, plugin, nlp, {**opts, **jit_opts})
-    fd, tmp = tempfile.mkstemp(prefix=stem, suffix=".tmp", dir=folder)
-    os.close(fd)
-    try:
+    tmp = None
+    try:  # the leftovers go whether the compile works or not (a failed one left its C source in the working folder)
+        solver = ca.nlpsol(name, plugin, nlp, {**opts, **jit_opts})
+        fd, tmp = tempfile.mkstemp(prefix=stem, suffix=".tmp", dir=folder)
+        os.close(fd)
         solver.save(tmp)
         os.replace(tmp, folder / f"{stem}.casadi")
     finally:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         for leftover in (Path.cwd() / f"{stem}.c", folder / f"{stem}.c", folder / f"{stem}.o"):
             leftover.unlink(missing_ok=True)  # CasADi writes the source to the working folder
     return solver

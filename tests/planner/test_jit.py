@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -88,3 +90,19 @@ def test_an_unwritable_cache_keeps_the_virtual_machine_under_auto_and_is_an_erro
     monkeypatch.setenv(jit_mod.JIT_ENV, "on")
     with pytest.raises(RuntimeError, match="compiling the MPC's NLP failed"):
         jit_mod.compiled_nlpsol("mpc", "fatrop", {}, {}, reference)
+
+
+@pytest.mark.skipif(jit_mod.compiler() is None, reason="no C compiler on PATH")
+def test_a_failed_compile_keeps_the_virtual_machine_and_leaves_no_c_source_behind(monkeypatch, tmp_path):
+    cwd, cache, bin_dir = tmp_path / "cwd", tmp_path / "cache", tmp_path / "bin"
+    for folder in (cwd, cache, bin_dir):
+        folder.mkdir()
+    broken = bin_dir / "gcc"
+    broken.write_text("#!/bin/sh\nexit 1\n")
+    broken.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}:{os.environ['PATH']}")
+    monkeypatch.chdir(cwd)
+    monkeypatch.setenv(jit_mod.CACHE_ENV, str(cache))
+    reference = _plans(monkeypatch, "off")
+    assert _plans(monkeypatch, "auto") == reference  # the compile failed: the virtual machine plans
+    assert not list(cwd.glob("*.c")) and not list(cache.glob("*.c")) and not list(cache.glob("*.so"))
