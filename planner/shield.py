@@ -73,17 +73,22 @@ def candidate_controls(robot: RobotConfig, preferred: np.ndarray) -> np.ndarray:
 @lru_cache(maxsize=16)
 def _command_grid(robot: RobotConfig) -> np.ndarray:
     """The (C - 1, 2) grid of `candidate_controls` (read-only: one array per robot, built once)."""
-    if robot.model == "unicycle":
-        speeds = np.linspace(-robot.min_speed_mps, robot.max_speed_mps, N_SPEEDS)
-        turns = np.linspace(-robot.max_yaw_rate_radps, robot.max_yaw_rate_radps, N_TURNS)
-        grid = np.stack(np.meshgrid(speeds, turns, indexing="ij"), axis=-1).reshape(-1, 2)
-    else:
-        speeds = np.linspace(0.0, robot.max_speed_mps, N_SPEEDS)[1:]
-        angles = np.linspace(-np.pi, np.pi, 2 * N_TURNS, endpoint=False)
-        dirs = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
-        grid = np.vstack([np.zeros((1, 2)), (speeds[:, None, None] * dirs[None]).reshape(-1, 2)])
+    grid = command_grid(robot, N_SPEEDS, N_TURNS)
     grid.flags.writeable = False
     return grid
+
+
+def command_grid(robot: RobotConfig, n_speeds: int, n_turns: int) -> np.ndarray:
+    """(C, 2) constant commands: unicycle, n_speeds forward speeds (from -min_speed_mps to the top speed) x n_turns yaw
+    rates; holonomic, standing still and n_speeds - 1 speeds x 2 n_turns directions (vx, vy)."""
+    if robot.model == "unicycle":
+        speeds = np.linspace(-robot.min_speed_mps, robot.max_speed_mps, n_speeds)
+        turns = np.linspace(-robot.max_yaw_rate_radps, robot.max_yaw_rate_radps, n_turns)
+        return np.stack(np.meshgrid(speeds, turns, indexing="ij"), axis=-1).reshape(-1, 2)
+    speeds = np.linspace(0.0, robot.max_speed_mps, n_speeds)[1:]
+    angles = np.linspace(-np.pi, np.pi, 2 * n_turns, endpoint=False)
+    dirs = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+    return np.vstack([np.zeros((1, 2)), (speeds[:, None, None] * dirs[None]).reshape(-1, 2)])
 
 
 def rollout_candidates(state: np.ndarray, commands: np.ndarray, dt_s: float, robot: RobotConfig) -> np.ndarray:

@@ -20,22 +20,15 @@ from __future__ import annotations
 import numpy as np
 
 from planner import RobotConfig
-from planner.shield import rollout_constant
+from planner.shield import command_grid, rollout_constant
 
 ESCAPE_SPEEDS = 7  # forward speeds (unicycle: from the reverse limit to the top speed) / speed magnitudes (holonomic)
 ESCAPE_TURNS = 11  # yaw rates (unicycle) / directions (holonomic: 2 * ESCAPE_TURNS)
 
 
 def escape_commands(robot: RobotConfig) -> np.ndarray:
-    """(C, 2) constant commands: unicycle (speed m/s, yaw rate rad/s), holonomic (vx, vy) m/s with standing still."""
-    if robot.model == "unicycle":
-        speeds = np.linspace(-robot.min_speed_mps, robot.max_speed_mps, ESCAPE_SPEEDS)
-        turns = np.linspace(-robot.max_yaw_rate_radps, robot.max_yaw_rate_radps, ESCAPE_TURNS)
-        return np.stack(np.meshgrid(speeds, turns, indexing="ij"), axis=-1).reshape(-1, 2)
-    speeds = np.linspace(0.0, robot.max_speed_mps, ESCAPE_SPEEDS)[1:]
-    angles = np.linspace(-np.pi, np.pi, 2 * ESCAPE_TURNS, endpoint=False)
-    dirs = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
-    return np.vstack([np.zeros((1, 2)), (speeds[:, None, None] * dirs[None]).reshape(-1, 2)])
+    """(C, 2) constant commands: the safety shield's grid (`planner.shield.command_grid`), finer."""
+    return command_grid(robot, ESCAPE_SPEEDS, ESCAPE_TURNS)
 
 
 def escape_clearance(robot_state: np.ndarray, robot: RobotConfig, dt_s: float, ped_track: np.ndarray,
