@@ -151,18 +151,14 @@ class ForesightConfig:
     # a subgoal farther from the goal than the nearest the robot has come to it (this episode) plus this is not
     # taken: the robot holds where it is instead of backing away with an oncoming flow; inf: no bound
     retreat_m: float = 2.0
-    # hysteresis: among the last set's cells at most this much farther from the target than its nearest, the one
-    # nearest the previous call's path end is traced back (the way does not flip sides every call); 0: the nearest
-    keep_m: float = 0.0
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))
         if not 0.0 < self.speed_fraction <= 1.0:
             raise ValueError(f"ForesightConfig.speed_fraction must be in (0, 1], got {self.speed_fraction!r}")
         _check_non_negative(self, ("clearance_m", "spread_inflation", "max_inflation_m"))
-        _check_non_negative(self, ("keep_m",))
         for name in ("horizon_s", "step_s", "cell_m", "clearance_m", "spread_inflation", "max_inflation_m",
-                     "goal_reach_m", "lead_s", "keep_m"):
+                     "goal_reach_m", "lead_s"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"ForesightConfig.{name} must be finite, got {getattr(self, name)!r}")
         if not self.retreat_m >= 0:

@@ -21,18 +21,14 @@ against the prediction:
    ahead is the subgoal (the way round, or a place to wait). Where no set lives to the end (or to the target) with
    `clearance_m`, the search runs again at contact distance (`retry_without_margin`; else the target).
 5. Nothing alive after the first step, or nobody predicted: the target (the MPC and the shield handle it).
-6. Hysteresis (`keep_m` > 0): in step 4 the cell traced back from is, among the last set's cells at most `keep_m`
-   farther from the target than its nearest, the one nearest the previous call's path end, so that the way does not
-   flip from one side of a group to the other between calls 0.1 s apart (in a dense crossing the subgoal jumped by
-   more than 1 m in 27% of consecutive plans).
-7. A subgoal farther from the goal than the nearest the robot has come to it in this episode plus `retreat_m` is
+6. A subgoal farther from the goal than the nearest the robot has come to it in this episode plus `retreat_m` is
    not taken: the robot holds where it is. In a corridor's oncoming flow the sets are pushed back by everyone walking
    at the robot, and the search would have it walk back with them for good (crowdnav-tune corridor-high-visible 1002:
    from 8.8 m to 16 m from the goal); a step back to let a crossing file pass stays within the bound.
 
 Units: metres, seconds. numpy and scipy (imported on first use); its state is `last_path`, the searched path (P, 2) m
-of the last call (None when the target was returned without one), for drawing, its end `last_end` (for `keep_m`),
-and `nearest_m`, the nearest approach to the goal since `reset` (a new episode).
+of the last call (None when the target was returned without one), for drawing, and `nearest_m`, the nearest approach
+to the goal since `reset` (a new episode).
 """
 
 from __future__ import annotations
@@ -60,11 +56,10 @@ class ForesightSearch:
         self.wall_clearance_m = float(wall_clearance_m)
         self.last_path: np.ndarray | None = None
         self.nearest_m = math.inf  # the nearest the robot has come to its goal since `reset` (retreat_m)
-        self.last_end: np.ndarray | None = None  # the end (2,) m of the last searched path (keep_m)
 
     def reset(self) -> None:
-        """Forget the episode: the nearest approach to the goal and the last path."""
-        self.nearest_m, self.last_path, self.last_end = math.inf, None, None
+        """Forget the episode: the nearest approach to the goal."""
+        self.nearest_m, self.last_path = math.inf, None
 
     def subgoal(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
                 walls: np.ndarray | None, goal: np.ndarray | None = None) -> np.ndarray:
@@ -75,7 +70,6 @@ class ForesightSearch:
         goal = target if goal is None else np.asarray(goal, float)
         self.nearest_m = min(self.nearest_m, float(np.hypot(*(position - goal))))
         if prediction is None or not np.any(prediction.mask):
-            self.last_end = None
             return target
         cfg = self.config
         n = max(1, int(round(cfg.horizon_s / cfg.step_s)))
@@ -89,19 +83,16 @@ class ForesightSearch:
             hit = disc_cells(xy[0, 0], cfg.cell_m, xy.shape[:2], tracks, contact + margin)  # (2n + 1, G0, G1)
             blocked = hit[2::2] | hit[1::2]  # step j: at j step_s and half a step before
             if self._straight_is_free(position, target, xy, free, blocked):
-                self.last_end = None
                 return target
             sets, end = self._reach(origin, xy, target, free, blocked)
             lives = end is not None and (len(sets) == n + 1 or np.hypot(*(xy[end] - target)) < cfg.goal_reach_m)
             if lives:
                 break
         if end is None or not (lives or cfg.retry_without_margin):
-            self.last_end = None
             return target
         step_cells = int(math.ceil(self._speed * cfg.step_s / cfg.cell_m)) + 1
         path = trace_back(sets, end, step_cells)
         self.last_path = xy[tuple(np.array(path).T)]
-        self.last_end = self.last_path[-1]
         lead = int(round(cfg.lead_s / cfg.step_s))
         if lead >= len(path) - 1 and np.hypot(*(self.last_path[-1] - target)) < cfg.goal_reach_m:
             return target
@@ -164,11 +155,7 @@ class ForesightSearch:
                 break
         if len(sets) == 1:
             return sets, None
-        score = np.where(sets[-1], goal_d, np.inf)
-        if cfg.keep_m > 0 and self.last_end is not None:  # near-best cells: the one nearest the last path's end
-            near = score <= score.min() + cfg.keep_m
-            score = np.where(near, np.hypot(*(xy - self.last_end).transpose(2, 0, 1)), np.inf)
-        end = np.unravel_index(np.argmin(score), start.shape)
+        end = np.unravel_index(np.argmin(np.where(sets[-1], goal_d, np.inf)), start.shape)
         return sets, (int(end[0]), int(end[1]))
 
 

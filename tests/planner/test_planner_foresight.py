@@ -128,8 +128,7 @@ def test_the_retreat_is_measured_from_the_episode_goal_not_the_waypoint() -> Non
 
 @pytest.mark.parametrize("field,value", [("horizon_s", 0.0), ("step_s", -1.0), ("speed_fraction", 1.5),
                                          ("clearance_m", -0.1), ("cell_m", float("nan")), ("horizon_s", 0.2),
-                                         ("retreat_m", -1.0), ("retreat_m", float("nan")),
-                                         ("keep_m", -0.5), ("keep_m", float("inf"))])
+                                         ("retreat_m", -1.0), ("retreat_m", float("nan"))])
 def test_config_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         ForesightConfig(**{field: value})
@@ -147,25 +146,3 @@ def test_disc_cells_match_a_brute_force_check_on_and_off_the_grid() -> None:
     d = np.linalg.norm(xy[None, None] - centres[:, :, None, None], axis=-1)  # (T, S, G0, G1)
     assert np.array_equal(got, np.any(d < clear[:, :, None, None], axis=1))
     assert got.any() and not got.all()
-
-
-def test_with_hysteresis_the_way_keeps_the_side_of_the_last_call() -> None:
-    """A wall of standing people 2 m ahead, 6 m wide, the target 20 m beyond: in a 4 s view the reachable cell nearest
-    the target is straight ahead at the wall, and cells at either end of it are within 0.25 m of that. With keep_m
-    0.5 the end on the last call's side is traced back; without it the nearest, whatever the last call chose."""
-    wall = np.stack([np.full(13, 2.0), np.linspace(-3.0, 3.0, 13)], axis=1)
-    pred = _walkers(wall, np.zeros((13, 2)))
-    target = np.array([20.0, 0.0])
-    sides = {}
-    for keep in (0.0, 0.5):
-        for last in (1.0, -1.0):
-            s = _search(horizon_s=4.0, keep_m=keep)
-            s.last_end = np.array([3.0, 4.0 * last])
-            s.subgoal(np.zeros(2), target, pred, None)
-            assert s.last_path is not None
-            sides[keep, last] = float(np.sign(s.last_path[-1][1]))
-            assert np.array_equal(s.last_end, s.last_path[-1])  # remembered for the next call
-    assert sides[0.5, 1.0] == 1.0 and sides[0.5, -1.0] == -1.0
-    assert sides[0.0, 1.0] == sides[0.0, -1.0] == 0.0
-    s.reset()
-    assert s.last_end is None
