@@ -6,7 +6,8 @@ budget: pass `--mpc time_budget_s=10` as the run did, if it did), and the script
 first appeared (seconds before the contact, and how far from the robot), and `escape_clearance`
 (envs/scoring/escape.py): the largest clearance a constant command held from that moment would have kept, knowing
 the pedestrian's future. Negative: no constant command escapes (people who enter a replayed recording a metre from
-the robot). A summary line counts them. A re-run whose outcome differs from the record is flagged and left out.
+the robot). A summary line counts them. A re-run that does not end in the record's collision (outcome, or contact time
+when the record has one) is flagged and left out.
 
     .venv/bin/python scripts/escape_check.py crowdnav-v1 out/bench/records.jsonl --policy mpc-oracle \
         --mpc time_budget_s=10
@@ -87,8 +88,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     rows = []
     for r in hits:
         out = rerun(loaded, pcfg, r["cell"], int(r["seed"]))
-        if out is None:
-            print(f"{r['cell']} {r['seed']}: the re-run did not end in a pedestrian collision (left out)")
+        recorded = r.get("collision_time_s")
+        if out is None or (recorded is not None and abs(out["contact_s"] - float(recorded)) > 0.05):
+            print(f"{r['cell']} {r['seed']}: the re-run did not end in the recorded pedestrian collision (left out)")
             continue
         rows.append(out)
         print(f"{r['cell']} {r['seed']} at fault {out['at_fault']}: contact at {out['contact_s']:.1f} s with someone "

@@ -70,10 +70,13 @@ def test_escape_check_reruns_a_collision_and_refuses_a_missing_file(tmp_path, ca
     records = tmp_path / "records.jsonl"
     record = {"cell": "tune-zara03", "seed": 1197, "policy": "mpc-oracle", "outcome": "collision",
               "collision_with": "pedestrian"}
-    records.write_text(json.dumps(record) + "\n" + json.dumps({**record, "outcome": "success"}) + "\n")
+    moved = {**record, "collision_time_s": 5.0}  # the same episode, another recorded contact: not this run's
+    records.write_text("\n".join(json.dumps(x) for x in (record, {**record, "outcome": "success"}, moved)) + "\n")
     assert check.main(["crowdnav-tune", str(records), "--policy", "mpc-oracle", "--mpc", "time_budget_s=10"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert len(lines) == 2 and lines[0].startswith("tune-zara03 1197 at fault pedestrian: contact at 2.6 s")
+    assert len(lines) == 3 and lines[0].startswith("tune-zara03 1197 at fault pedestrian: contact at 2.6 s")
+    assert lines[1] == "tune-zara03 1197: the re-run did not end in the recorded pedestrian collision (left out)"
+    lines = [lines[0], lines[2]]
     assert "first seen 1.9 s before, 1.18 m away; escape clearance +" in lines[0]
     assert lines[1].startswith("1 pedestrian collisions re-run: 0 with someone first seen < 1 s before; 0 not")
     assert check.main(["crowdnav-tune", str(tmp_path / "none.jsonl"), "--policy", "mpc-oracle"]) == 2
