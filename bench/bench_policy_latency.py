@@ -7,8 +7,9 @@ Every policy runs the same episodes of the suite's cell (`--suite`: crowdnav-cla
 rays it was trained with), `mpc-cv` and `mpc-gpgraph` re-planning every `replan_every_steps` of the suite (5 in
 CrowdNav's settings, 1 in crowdnav-v1) with the suite's planner defaults. Measured: the wall time of
 `envs.policies.act` at each policy's decision steps (the policy's view of the env, its predictor, its solve or
-forward pass, and the action), one torch thread, one process. The table gives p50 / p95 / max in ms and the ratio
-of each p50 and p95 to mpc-gpgraph's.
+forward pass, and the action) plus, for an agent that observes predictions, the env's prediction updates since the
+last decision (its predictor and calibration run in the env's step, not in `act`), one torch thread, one process.
+The table gives p50 / p95 / max in ms and the ratio of each p50 and p95 to mpc-gpgraph's.
 
     python bench/bench_policy_latency.py              # 10 episodes per policy, about a minute
     python bench/bench_policy_latency.py --quick      # 2 episodes per policy
@@ -57,8 +58,10 @@ def decision_times(suite_name: str, cell: str, name: str, episodes: int,
     env = CrowdNavEnv(observed(suite.cell(cell).env_config(SEED0), agent_observation(config)))
     policy = make_policy(config, env)
     every = getattr(policy, "decision_every_steps", every)
+    observing = _time_observed_predictions(env)  # an agent's predictor runs in the env, not in `act`
     times = []
     for seed in range(SEED0, SEED0 + episodes):
+        observing.pop()  # the last episode's final update is nobody's decision
         env.reset(seed=seed)
         policy.reset(seed)
         step, done = 0, False
@@ -66,10 +69,35 @@ def decision_times(suite_name: str, cell: str, name: str, episodes: int,
             start = time.perf_counter()
             action = act(policy, env)
             if step % every == 0:
-                times.append(time.perf_counter() - start)
+                times.append(time.perf_counter() - start + observing.pop())
             done = any(env.step(action)[2:4])
             step += 1
     return np.array(times)
+
+
+class _Elapsed:
+    """Seconds spent in a wrapped call since the last `pop`."""
+
+    def __init__(self) -> None:
+        self.s = 0.0
+
+    def pop(self) -> float:
+        out, self.s = self.s, 0.0
+        return out
+
+
+def _time_observed_predictions(env: CrowdNavEnv) -> _Elapsed:
+    """Wrap the env's prediction update (the observation's predictor and calibration, run in `step` / `reset` when
+    the observation carries predictions) so that its time is added to the decision that reads it."""
+    elapsed, update = _Elapsed(), env._update_prediction
+
+    def timed() -> None:
+        start = time.perf_counter()
+        update()
+        elapsed.s += time.perf_counter() - start
+
+    env._update_prediction = timed
+    return elapsed
 
 
 def main(argv: list[str] | None = None) -> int:
