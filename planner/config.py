@@ -151,11 +151,6 @@ class ForesightConfig:
     # a subgoal farther from the goal than the nearest the robot has come to it (this episode) plus this is not
     # taken: the robot holds where it is instead of backing away with an oncoming flow; inf: no bound
     retreat_m: float = 2.0
-    # follow one searched path for this long (the subgoal: its point lead_s ahead of now), then search again from
-    # where it has the robot (stitched); 0: search at every call. call_period_s: the time between calls (the env's
-    # step where the planner re-plans every step), the search's clock
-    replan_s: float = 0.0
-    call_period_s: float = 0.1
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))
@@ -166,10 +161,6 @@ class ForesightConfig:
                      "goal_reach_m", "lead_s"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"ForesightConfig.{name} must be finite, got {getattr(self, name)!r}")
-        _check_non_negative(self, ("replan_s",))
-        _check_positive(self, ("call_period_s",))
-        if not (math.isfinite(self.replan_s) and math.isfinite(self.call_period_s)):
-            raise ValueError("ForesightConfig.replan_s and call_period_s must be finite")
         if not self.retreat_m >= 0:
             raise ValueError(f"ForesightConfig.retreat_m must be >= 0 (inf: off), got {self.retreat_m!r}")
         if self.horizon_s < self.step_s:

@@ -42,7 +42,6 @@ from planner.prediction import PedPrediction, current_positions
 from planner.scene import point_segment_distances
 
 BOX_MARGIN_M = 3.0  # the grid covers robot and target with this much room around both
-STITCH_M = 0.5  # replan_s: farther than this from where the stored path has it now, the robot searches afresh
 
 
 class ForesightSearch:
@@ -57,38 +56,24 @@ class ForesightSearch:
         self.wall_clearance_m = float(wall_clearance_m)
         self.last_path: np.ndarray | None = None
         self.nearest_m = math.inf  # the nearest the robot has come to its goal since `reset` (retreat_m)
-        self._plan: np.ndarray | None = None  # replan_s: the stored path (P, 2) m, a point every step_s
-        self._age = 0  # calls since it was searched
 
     def reset(self) -> None:
-        """Forget the episode: the nearest approach to the goal and the stored path."""
-        self.nearest_m, self.last_path, self._plan, self._age = math.inf, None, None, 0
+        """Forget the episode: the nearest approach to the goal."""
+        self.nearest_m, self.last_path = math.inf, None
 
     def subgoal(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
                 walls: np.ndarray | None, goal: np.ndarray | None = None) -> np.ndarray:
         """The point (2,) m to head for from position (2,) towards target (2,), or the target itself. goal (2,) m:
         the episode's goal where target is a waypoint to it (the route's), for `retreat_m`; default target."""
+        self.last_path = None
         position, target = np.asarray(position, float), np.asarray(target, float)
         goal = target if goal is None else np.asarray(goal, float)
         self.nearest_m = min(self.nearest_m, float(np.hypot(*(position - goal))))
-        cfg = self.config
-        start = position
-        if self._plan is not None:  # replan_s: follow the stored path, stitched to where it has the robot now
-            self._age += 1
-            here = _at(self._plan, self._age * cfg.call_period_s, cfg.step_s)
-            if np.hypot(*(here - position)) > STITCH_M:
-                self._plan = None
-            elif self._age * cfg.call_period_s < cfg.replan_s:
-                self.last_path = self._plan
-                return self._held(_at(self._plan, self._age * cfg.call_period_s + cfg.lead_s, cfg.step_s), goal,
-                                  position)
-            else:
-                start = here
-        self.last_path, self._plan = None, None
         if prediction is None or not np.any(prediction.mask):
             return target
+        cfg = self.config
         n = max(1, int(round(cfg.horizon_s / cfg.step_s)))
-        xy, origin = self._grid(start, target, n * cfg.step_s)
+        xy, origin = self._grid(position, target, n * cfg.step_s)
         tracks, spread = person_tracks(prediction, cfg.step_s / 2.0, 2 * n)  # (2n + 1, P, 2), (2n + 1, P)
         radii = np.asarray(prediction.radii, float)[np.asarray(prediction.mask, bool)]
         contact = radii + self.robot_radius_m + np.minimum(cfg.max_inflation_m, cfg.spread_inflation * spread)
@@ -97,7 +82,7 @@ class ForesightSearch:
         for margin in dict.fromkeys(margins):  # the margin first; without it if no set lives to the end
             hit = disc_cells(xy[0, 0], cfg.cell_m, xy.shape[:2], tracks, contact + margin)  # (2n + 1, G0, G1)
             blocked = hit[2::2] | hit[1::2]  # step j: at j step_s and half a step before
-            if self._straight_is_free(start, target, xy, free, blocked):
+            if self._straight_is_free(position, target, xy, free, blocked):
                 return target
             sets, end = self._reach(origin, xy, target, free, blocked)
             lives = end is not None and (len(sets) == n + 1 or np.hypot(*(xy[end] - target)) < cfg.goal_reach_m)
@@ -111,13 +96,8 @@ class ForesightSearch:
         lead = int(round(cfg.lead_s / cfg.step_s))
         if lead >= len(path) - 1 and np.hypot(*(self.last_path[-1] - target)) < cfg.goal_reach_m:
             return target
-        if cfg.replan_s > 0:
-            self._plan, self._age = self.last_path, 0
-        return self._held(self.last_path[min(lead, len(path) - 1)], goal, position)
-
-    def _held(self, subgoal: np.ndarray, goal: np.ndarray, position: np.ndarray) -> np.ndarray:
-        """subgoal, or position where it is farther from the goal than the nearest approach + retreat_m."""
-        if np.hypot(*(subgoal - goal)) > self.nearest_m + self.config.retreat_m:
+        subgoal = self.last_path[min(lead, len(path) - 1)]
+        if np.hypot(*(subgoal - goal)) > self.nearest_m + cfg.retreat_m:
             return position  # hold: backing away with an oncoming flow loses the ground gained (module docstring)
         return subgoal
 
@@ -177,16 +157,6 @@ class ForesightSearch:
             return sets, None
         end = np.unravel_index(np.argmin(np.where(sets[-1], goal_d, np.inf)), start.shape)
         return sets, (int(end[0]), int(end[1]))
-
-
-def _at(path: np.ndarray, t_s: float, step_s: float) -> np.ndarray:
-    """The point (2,) m of a timed path (P, 2) (a point every step_s from 0) at t_s, linear between; its end after."""
-    u = min(max(t_s / step_s, 0.0), len(path) - 1.0)
-    i = min(int(u), len(path) - 2) if len(path) > 1 else 0
-    if len(path) == 1:
-        return path[0]
-    w = u - i
-    return (1.0 - w) * path[i] + w * path[i + 1]
 
 
 def person_tracks(prediction: PedPrediction, step_s: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:

@@ -128,8 +128,7 @@ def test_the_retreat_is_measured_from_the_episode_goal_not_the_waypoint() -> Non
 
 @pytest.mark.parametrize("field,value", [("horizon_s", 0.0), ("step_s", -1.0), ("speed_fraction", 1.5),
                                          ("clearance_m", -0.1), ("cell_m", float("nan")), ("horizon_s", 0.2),
-                                         ("retreat_m", -1.0), ("retreat_m", float("nan")),
-                                         ("replan_s", -1.0), ("call_period_s", 0.0)])
+                                         ("retreat_m", -1.0), ("retreat_m", float("nan"))])
 def test_config_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         ForesightConfig(**{field: value})
@@ -147,29 +146,3 @@ def test_disc_cells_match_a_brute_force_check_on_and_off_the_grid() -> None:
     d = np.linalg.norm(xy[None, None] - centres[:, :, None, None], axis=-1)  # (T, S, G0, G1)
     assert np.array_equal(got, np.any(d < clear[:, :, None, None], axis=1))
     assert got.any() and not got.all()
-
-
-def test_with_replan_s_the_stored_path_is_followed_then_searched_again_from_where_it_has_the_robot() -> None:
-    """replan_s 1 s, calls every 0.1 s: the calls in between hand out the stored path's point lead_s past now
-    (no search: even without a prediction), a robot 0.5 m off the path gets a fresh search, and after replan_s
-    the search starts from where the stored path has the robot."""
-    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
-    pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
-    target = np.array([6.0, 0.0])
-    s = _search(replan_s=1.0, lead_s=2.0)
-    first = s.subgoal(np.zeros(2), target, pred, None)
-    path = s.last_path.copy()
-    assert not np.array_equal(first, target) and np.allclose(first, path[5])  # 2 s ahead: step 5 of 0.4 s
-    on_path = path[0] + 0.25 * (path[1] - path[0])  # 0.1 s later, where the path has the robot
-    second = s.subgoal(on_path, target, None, None)  # stored: no search, so no prediction needed
-    assert np.allclose(second, path[5] + 0.25 * (path[6] - path[5]))
-    assert np.array_equal(s.subgoal(on_path + np.array([0.0, 0.6]), target, None, None), target)  # off: afresh
-    s = _search(replan_s=1.0, lead_s=2.0)
-    s.subgoal(np.zeros(2), target, pred, None)
-    for k in range(1, 10):
-        s.subgoal(path[0] + (path[1] - path[0]) * k / 4 if k <= 4 else path[1] + (path[2] - path[1]) * (k - 4) / 4,
-                  target, None, None)
-    s.subgoal(path[2] + 0.5 * (path[3] - path[2]), target, pred, None)  # 1.0 s: searched again from path at 1.0 s
-    assert s.last_path is not None and np.allclose(s.last_path[0], path[2] + 0.5 * (path[3] - path[2]), atol=1e-9)
-    s.reset()
-    assert np.array_equal(s.subgoal(np.zeros(2), target, None, None), target)  # forgotten: no stored path
