@@ -31,6 +31,7 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from env_loop import Timers  # bench/ is on sys.path when a bench script runs
 
 from envs.env import CrowdNavEnv
 from envs.evaluation.benchmark import observed
@@ -58,10 +59,11 @@ def decision_times(suite_name: str, cell: str, name: str, episodes: int,
     env = CrowdNavEnv(observed(suite.cell(cell).env_config(SEED0), agent_observation(config)))
     policy = make_policy(config, env)
     every = getattr(policy, "decision_every_steps", every)
-    observing = _time_observed_predictions(env)  # an agent's predictor runs in the env, not in `act`
+    observing = Timers()  # an agent's predictor and calibration run in the env's step / reset, not in `act`
+    observing.wrap(env, "_update_prediction", "predictions")
     times = []
     for seed in range(SEED0, SEED0 + episodes):
-        observing.pop()  # the last episode's final update is nobody's decision
+        observing.take()  # the last episode's final update is nobody's decision
         env.reset(seed=seed)
         policy.reset(seed)
         step, done = 0, False
@@ -69,35 +71,10 @@ def decision_times(suite_name: str, cell: str, name: str, episodes: int,
             start = time.perf_counter()
             action = act(policy, env)
             if step % every == 0:
-                times.append(time.perf_counter() - start + observing.pop())
+                times.append(time.perf_counter() - start + observing.take()["predictions"])
             done = any(env.step(action)[2:4])
             step += 1
     return np.array(times)
-
-
-class _Elapsed:
-    """Seconds spent in a wrapped call since the last `pop`."""
-
-    def __init__(self) -> None:
-        self.s = 0.0
-
-    def pop(self) -> float:
-        out, self.s = self.s, 0.0
-        return out
-
-
-def _time_observed_predictions(env: CrowdNavEnv) -> _Elapsed:
-    """Wrap the env's prediction update (the observation's predictor and calibration, run in `step` / `reset` when
-    the observation carries predictions) so that its time is added to the decision that reads it."""
-    elapsed, update = _Elapsed(), env._update_prediction
-
-    def timed() -> None:
-        start = time.perf_counter()
-        update()
-        elapsed.s += time.perf_counter() - start
-
-    env._update_prediction = timed
-    return elapsed
 
 
 def main(argv: list[str] | None = None) -> int:
