@@ -151,9 +151,6 @@ class ForesightConfig:
     # a subgoal farther from the goal than the nearest the robot has come to it (this episode) plus this is not
     # taken: the robot holds where it is instead of backing away with an oncoming flow; inf: no bound
     retreat_m: float = 2.0
-    # the MPC's stage k heads for the searched path's point at k dt_s (a time-indexed reference: the path's way round
-    # and its waits, in time) instead of every stage heading for the subgoal
-    track_path: bool = False
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))

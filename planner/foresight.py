@@ -56,17 +56,16 @@ class ForesightSearch:
         self.wall_clearance_m = float(wall_clearance_m)
         self.last_path: np.ndarray | None = None
         self.nearest_m = math.inf  # the nearest the robot has come to its goal since `reset` (retreat_m)
-        self._way: np.ndarray | None = None  # the last call's path up to its subgoal (`reference`)
 
     def reset(self) -> None:
         """Forget the episode: the nearest approach to the goal."""
-        self.nearest_m, self.last_path, self._way = math.inf, None, None
+        self.nearest_m, self.last_path = math.inf, None
 
     def subgoal(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
                 walls: np.ndarray | None, goal: np.ndarray | None = None) -> np.ndarray:
         """The point (2,) m to head for from position (2,) towards target (2,), or the target itself. goal (2,) m:
         the episode's goal where target is a waypoint to it (the route's), for `retreat_m`; default target."""
-        self.last_path = self._way = None
+        self.last_path = None
         position, target = np.asarray(position, float), np.asarray(target, float)
         goal = target if goal is None else np.asarray(goal, float)
         self.nearest_m = min(self.nearest_m, float(np.hypot(*(position - goal))))
@@ -96,27 +95,11 @@ class ForesightSearch:
         self.last_path = xy[tuple(np.array(path).T)]
         lead = int(round(cfg.lead_s / cfg.step_s))
         if lead >= len(path) - 1 and np.hypot(*(self.last_path[-1] - target)) < cfg.goal_reach_m:
-            self._way = self.last_path
             return target
         subgoal = self.last_path[min(lead, len(path) - 1)]
-        self._way = self.last_path[: min(lead, len(path) - 1) + 1]
         if np.hypot(*(subgoal - goal)) > self.nearest_m + cfg.retreat_m:
-            self._way = None
             return position  # hold: backing away with an oncoming flow loses the ground gained (module docstring)
         return subgoal
-
-    def reference(self, subgoal: np.ndarray, times_s: np.ndarray) -> np.ndarray:
-        """The last call's way (len(times_s), 2) m at times_s (s from now): the searched path's points (linear between
-        the sets' times, step_s apart) up to the subgoal it returned (2,) m, that subgoal after; the subgoal at every
-        time where it searched no way to follow (it returned the target straight, or held)."""
-        subgoal, times_s = np.asarray(subgoal, float), np.asarray(times_s, float)
-        if self._way is None:
-            return np.tile(subgoal, (len(times_s), 1))
-        path = np.vstack([self._way, subgoal])
-        u = np.clip(times_s / self.config.step_s, 0.0, len(path) - 1.0)
-        i = np.minimum(np.floor(u).astype(int), len(path) - 2)
-        w = (u - i)[:, None]
-        return path[i] * (1.0 - w) + path[i + 1] * w
 
     @property
     def _speed(self) -> float:

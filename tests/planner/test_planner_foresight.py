@@ -93,34 +93,6 @@ def test_the_planner_heads_for_the_searched_point() -> None:
     assert planner.foresight.nearest_m == np.inf
 
 
-def test_the_reference_is_the_searched_way_in_time_then_the_subgoal() -> None:
-    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
-    pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
-    s = _search()
-    sub = s.subgoal(np.zeros(2), np.array([6.0, 0.0]), pred, None)
-    times = 0.4 * np.arange(1, 16)  # 6 s: past the subgoal's time (lead_s 4 s)
-    ref = s.reference(sub, times)
-    assert np.allclose(ref[:10], s.last_path[1:11])  # the sets' times are the knots' here: the path's own points
-    assert np.allclose(ref[9:], sub)  # at the subgoal's time and after it
-    mid = s.reference(sub, np.array([0.6]))[0]
-    assert np.allclose(mid, 0.5 * (s.last_path[1] + s.last_path[2]))  # linear between the sets' times
-    s.subgoal(np.zeros(2), np.array([6.0, 0.0]), None, None)  # nobody: no way searched, the target at every time
-    assert np.allclose(s.reference(np.array([6.0, 0.0]), times), [6.0, 0.0])
-
-
-def test_tracking_the_way_plans_closer_to_it_than_heading_for_its_subgoal() -> None:
-    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
-    pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
-    gaps = {}
-    for track in (False, True):
-        planner = MPCPlanner(MPCConfig(solver="ipopt", foresight=ForesightConfig(track_path=track)))
-        result = planner.plan(np.zeros(5), np.array([10.0, 0.0]), pred)
-        assert result.status == "solved"
-        ref = planner.foresight.reference(result.subgoal, 0.4 * np.arange(1, 11))
-        gaps[track] = float(np.linalg.norm(result.states[1:, :2] - ref, axis=1).mean())
-    assert gaps[True] < 0.6 * gaps[False]
-
-
 def _oncoming_line() -> PedPrediction:
     """A line of walkers 0.5 m apart across y in [-7, 7], 2.5 m ahead of the robot, walking at it at 0.6 m/s: no way
     through or round within the view, so the search backs away before it."""
@@ -174,4 +146,3 @@ def test_disc_cells_match_a_brute_force_check_on_and_off_the_grid() -> None:
     d = np.linalg.norm(xy[None, None] - centres[:, :, None, None], axis=-1)  # (T, S, G0, G1)
     assert np.array_equal(got, np.any(d < clear[:, :, None, None], axis=1))
     assert got.any() and not got.all()
-
