@@ -151,14 +151,6 @@ class ForesightConfig:
     # a subgoal farther from the goal than the nearest the robot has come to it (this episode) plus this is not
     # taken: the robot holds where it is instead of backing away with an oncoming flow; inf: no bound
     retreat_m: float = 2.0
-    # the MPC's stage k heads for the searched path's point at k dt_s (a time-indexed reference: the path's way round
-    # and its waits, in time) instead of every stage heading for the subgoal
-    track_path: bool = False
-    # one searched path is followed this long (s) before the next search, which starts from where that path has the
-    # robot (stitched); sooner where the current prediction meets the path or the robot is 0.5 m off it. 0: a new
-    # search from the robot every call
-    follow_s: float = 0.0
-    call_period_s: float = 0.1  # time between calls (the env's decision period): the follower's clock
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))

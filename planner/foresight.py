@@ -42,7 +42,6 @@ from planner.prediction import PedPrediction, current_positions
 from planner.scene import point_segment_distances
 
 BOX_MARGIN_M = 3.0  # the grid covers robot and target with this much room around both
-STITCH_M = 0.5  # follow_s: farther than this from where the followed path has it now, the robot searches afresh
 
 
 class ForesightSearch:
@@ -57,52 +56,22 @@ class ForesightSearch:
         self.wall_clearance_m = float(wall_clearance_m)
         self.last_path: np.ndarray | None = None
         self.nearest_m = math.inf  # the nearest the robot has come to its goal since `reset` (retreat_m)
-        self._way: np.ndarray | None = None  # the last call's path up to its subgoal (`reference`)
-        self._plan: np.ndarray | None = None  # follow_s: the followed path (P, 2) m, a point every step_s
-        self._age = 0  # calls since it was searched
 
     def reset(self) -> None:
-        """Forget the episode: the nearest approach to the goal, the followed path."""
-        self.nearest_m, self.last_path, self._way, self._plan, self._age = math.inf, None, None, None, 0
-
-    def _follow(self, position: np.ndarray, prediction: PedPrediction | None) -> tuple[np.ndarray | None, bool]:
-        """follow_s: (where the followed path has the robot now, or None: search from the robot; whether to keep
-        following it instead of searching)."""
-        cfg = self.config
-        if self._plan is None:
-            return None, False
-        self._age += 1
-        t = self._age * cfg.call_period_s
-        here = _at(self._plan, t, cfg.step_s)
-        if np.hypot(*(here - position)) > STITCH_M:
-            self._plan = None
-            return None, False
-        keep = t < cfg.follow_s and (prediction is None or self._path_clear(self._plan, t, prediction))
-        return here, keep
+        """Forget the episode: the nearest approach to the goal."""
+        self.nearest_m, self.last_path = math.inf, None
 
     def subgoal(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
                 walls: np.ndarray | None, goal: np.ndarray | None = None) -> np.ndarray:
         """The point (2,) m to head for from position (2,) towards target (2,), or the target itself. goal (2,) m:
         the episode's goal where target is a waypoint to it (the route's), for `retreat_m`; default target."""
-        self.last_path = self._way = None
+        self.last_path = None
         position, target = np.asarray(position, float), np.asarray(target, float)
         goal = target if goal is None else np.asarray(goal, float)
         self.nearest_m = min(self.nearest_m, float(np.hypot(*(position - goal))))
-        cfg = self.config
-        here, keep = self._follow(position, prediction)
-        if keep:  # the followed path, from now on
-            t = self._age * cfg.call_period_s
-            self.last_path = self._plan
-            self._way = np.array([_at(self._plan, t + j * cfg.step_s, cfg.step_s)
-                                  for j in range(int(round(cfg.lead_s / cfg.step_s)) + 1)])
-            if t + cfg.lead_s >= (len(self._plan) - 1) * cfg.step_s \
-                    and np.hypot(*(self._plan[-1] - target)) < cfg.goal_reach_m:
-                return target
-            return self._held(self._way[-1], goal, position)
-        self._plan, robot = None, position
         if prediction is None or not np.any(prediction.mask):
             return target
-        position = position if here is None else here  # stitched: the search starts where the last path has the robot
+        cfg = self.config
         n = max(1, int(round(cfg.horizon_s / cfg.step_s)))
         xy, origin = self._grid(position, target, n * cfg.step_s)
         tracks, spread = person_tracks(prediction, cfg.step_s / 2.0, 2 * n)  # (2n + 1, P, 2), (2n + 1, P)
@@ -125,50 +94,12 @@ class ForesightSearch:
         path = trace_back(sets, end, step_cells)
         self.last_path = xy[tuple(np.array(path).T)]
         lead = int(round(cfg.lead_s / cfg.step_s))
-        if cfg.follow_s > 0:
-            self._plan, self._age = self.last_path, 0
         if lead >= len(path) - 1 and np.hypot(*(self.last_path[-1] - target)) < cfg.goal_reach_m:
-            self._way = self.last_path
             return target
         subgoal = self.last_path[min(lead, len(path) - 1)]
-        self._way = self.last_path[: min(lead, len(path) - 1) + 1]
-        return self._held(subgoal, goal, robot)
-
-    def _held(self, subgoal: np.ndarray, goal: np.ndarray, position: np.ndarray) -> np.ndarray:
-        """subgoal, or position where it is farther from the goal than the nearest approach + retreat_m."""
-        if np.hypot(*(subgoal - goal)) > self.nearest_m + self.config.retreat_m:
-            self._way = None
+        if np.hypot(*(subgoal - goal)) > self.nearest_m + cfg.retreat_m:
             return position  # hold: backing away with an oncoming flow loses the ground gained (module docstring)
         return subgoal
-
-    def _path_clear(self, plan: np.ndarray, t_s: float, prediction: PedPrediction) -> bool:
-        """Whether the path (a point every step_s) from t_s to the view's end keeps contact distance (+ the spread
-        inflation) from every person's predicted sample mean, checked every half step_s."""
-        cfg = self.config
-        if not np.any(prediction.mask):
-            return True
-        n = 2 * max(1, int(round(cfg.horizon_s / cfg.step_s)))
-        tracks, spread = person_tracks(prediction, cfg.step_s / 2.0, n)
-        radii = np.asarray(prediction.radii, float)[np.asarray(prediction.mask, bool)]
-        contact = radii + self.robot_radius_m + np.minimum(cfg.max_inflation_m, cfg.spread_inflation * spread)
-        u = np.minimum((t_s + 0.5 * cfg.step_s * np.arange(n + 1)) / cfg.step_s, len(plan) - 1.0)
-        i = np.minimum(np.floor(u).astype(int), max(len(plan) - 2, 0))
-        w = (u - i)[:, None]
-        pts = plan[i] * (1.0 - w) + plan[np.minimum(i + 1, len(plan) - 1)] * w  # (n + 1, 2)
-        return bool(np.all(np.hypot(*(tracks - pts[:, None]).transpose(2, 0, 1)) >= contact))
-
-    def reference(self, subgoal: np.ndarray, times_s: np.ndarray) -> np.ndarray:
-        """The last call's way (len(times_s), 2) m at times_s (s from now): the searched path's points (linear between
-        the sets' times, step_s apart) up to the subgoal it returned (2,) m, that subgoal after; the subgoal at every
-        time where it searched no way to follow (it returned the target straight, or held)."""
-        subgoal, times_s = np.asarray(subgoal, float), np.asarray(times_s, float)
-        if self._way is None:
-            return np.tile(subgoal, (len(times_s), 1))
-        path = np.vstack([self._way, subgoal])
-        u = np.clip(times_s / self.config.step_s, 0.0, len(path) - 1.0)
-        i = np.minimum(np.floor(u).astype(int), len(path) - 2)
-        w = (u - i)[:, None]
-        return path[i] * (1.0 - w) + path[i + 1] * w
 
     @property
     def _speed(self) -> float:
@@ -226,15 +157,6 @@ class ForesightSearch:
             return sets, None
         end = np.unravel_index(np.argmin(np.where(sets[-1], goal_d, np.inf)), start.shape)
         return sets, (int(end[0]), int(end[1]))
-
-
-def _at(path: np.ndarray, t_s: float, step_s: float) -> np.ndarray:
-    """The point (2,) m of a timed path (P, 2) (a point every step_s from 0) at t_s, linear between; its end after."""
-    if len(path) == 1:
-        return path[0]
-    u = min(max(t_s / step_s, 0.0), len(path) - 1.0)
-    i = min(int(u), len(path) - 2)
-    return (1.0 - (u - i)) * path[i] + (u - i) * path[i + 1]
 
 
 def person_tracks(prediction: PedPrediction, step_s: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:

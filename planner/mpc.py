@@ -136,7 +136,7 @@ class MPCPlanner:
         try:
             subgoal = self._subgoal(state, goal, prediction, obstacles)
             routed = time.perf_counter() - routed
-            result = self._solve(state, subgoal, prediction, obstacles, self._reference(subgoal))
+            result = self._solve(state, subgoal, prediction, obstacles)
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
         except Exception as exc:  # never raise inside the control loop
             result = self._fallback(state, "solver_error", f"{type(exc).__name__}: {exc}", 0.0, 0, np.inf)
@@ -157,14 +157,6 @@ class MPCPlanner:
             subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles, goal)
         return subgoal
 
-    def _reference(self, subgoal: np.ndarray) -> np.ndarray:
-        """What stages 1..H head for, (H, 2) m: the subgoal; with the foresight search's ``track_path``, the searched
-        way at each stage's time (`ForesightSearch.reference`)."""
-        h, dt = self.config.horizon_steps, self.config.dt_s
-        if self.foresight is None or not self.foresight.config.track_path:
-            return np.tile(subgoal, (h, 1))
-        return self.foresight.reference(subgoal, dt * np.arange(1, h + 1))
-
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:
         """``result`` with its first control checked by the safety shield (planner/shield.py); the shield's
         wall time is added to ``solve_time_s``. A shield error keeps the plan's control (never raises)."""
@@ -184,15 +176,13 @@ class MPCPlanner:
                        shield_risk=verdict.risk, shielded=verdict.replaced)
 
     # -- solving -------------------------------------------------------------------------------
-    def _solve(self, state, goal, prediction, obstacles, reference=None) -> PlanResult:
-        """One plan heading for goal (2,) m (the guesses' and guidance's aim), its stages for reference (H, 2) m
-        (default: goal at every stage)."""
+    def _solve(self, state, goal, prediction, obstacles) -> PlanResult:
         cfg, ocp = self.config, self.ocp
         scene = build_scene(state, prediction, obstacles, cfg)
         if scene.start_penetration_m > 0.0:  # already overlapping someone: infeasible as posed
             depth = scene.start_penetration_m
             return self._fallback(state, "infeasible", "start in collision", 0.0, 0, depth)
-        p = pack_params(ocp.sizes, state, goal if reference is None else reference, scene)
+        p = pack_params(ocp.sizes, state, goal, scene)
         tries = [self._solve_from(w0, p) for w0 in self._initial_guesses(state, goal, p, cfg.n_starts)]
         if cfg.guidance is not None:
             tries = self._guided_tries(state, goal, scene, prediction, p, tries)

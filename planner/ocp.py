@@ -8,9 +8,8 @@ Constraints are ordered ``dyn_0 path_0 dyn_1 path_1 ... path_H`` with
 
 Cost (summed over stages; positions p_k = z_k[:2], stages 1..H unless noted):
 
-* progress: ``goal * hub(p_k - g_k)`` plus ``goal_terminal * hub(p_H - g_H)``, with the pseudo-Huber
-  distance ``hub(d) = sqrt(|d|² + 0.01) - 0.1`` (m) and g_k the point stage k heads for (the goal block, (H, 2):
-  the same point at every stage, or a time-indexed reference such as the foresight search's path);
+* progress: ``goal * hub(p_k - goal)`` plus ``goal_terminal * hub(p_H - goal)``, with the pseudo-Huber
+  distance ``hub(d) = sqrt(|d|² + 0.01) - 0.1`` (m);
 * effort (k = 0..H-1): ``effort * sum((u_k / u_max)²)``;
 * smoothness (k = 0..H-1): ``smoothness * sum(((u_k - v_k) / (a_max dt))²)``, v_k the velocity in z_k;
 * social comfort: ``social / K * sum_{m, j} mask_m exp(-|p_k - q_kmj|² / (2 comfort²))``;
@@ -81,7 +80,7 @@ def param_shapes(sz: Sizes) -> dict[str, tuple[int, ...]]:
     """Shapes of the parameter blocks, in the order they are packed into the flat vector p. With guidance
     (``sz.sides``) two more: each pedestrian's half-plane normals and the switch between disc and half-plane."""
     shapes = {
-        "z0": (sz.nz,), "goal": (sz.h, 2),
+        "z0": (sz.nz,), "goal": (2,),
         "ped_pos": (sz.nt, sz.m, sz.k, 2), "ped_clear": (sz.nt, sz.m), "ped_mask": (sz.m,),
         "grp_a": (sz.nt, sz.g, sz.k, 2), "grp_b": (sz.nt, sz.g, sz.k, 2), "grp_clear": (sz.nt, sz.g, sz.k),
         "grp_mask": (sz.g,), "walls": (sz.w, 4), "wall_mask": (sz.w,), "wall_side": (sz.w,),
@@ -102,11 +101,8 @@ def param_slices(sz: Sizes) -> dict[str, slice]:
 
 
 def pack_params(sz: Sizes, z0: np.ndarray, goal: np.ndarray, scene: SceneArrays) -> np.ndarray:
-    """Flat parameter vector (C order within each block). goal: (2,) m, the point every stage heads for, or (H, 2)
-    m, stage k's (k = 1..H). With guidance the half-plane switches are off (every pedestrian a disc):
-    `planner.guidance` writes a guided solve's blocks over them."""
-    goal = np.asarray(goal, float)
-    goal = np.broadcast_to(goal, (sz.h, 2)) if goal.shape == (2,) else goal
+    """Flat parameter vector (C order within each block). With guidance the half-plane switches are off (every
+    pedestrian a disc): `planner.guidance` writes a guided solve's blocks over them."""
     values = {"z0": z0, "goal": goal, **{name: getattr(scene, name) for name in param_shapes(sz)
                                          if name not in ("z0", "goal", "ped_normal", "ped_side")}}
     if sz.sides:
@@ -290,7 +286,7 @@ def _ped_gap(b: _Builder, pos: ca.SX, t: int, m: int, j: int) -> ca.SX:
 
 
 def _goal_cost(b: _Builder, k: int) -> None:
-    goal, z = b.par["goal"][k - 1], b.z[k]
+    goal, z = b.par["goal"], b.z[k]
     hub = ca.sqrt((z[0] - goal[0]) ** 2 + (z[1] - goal[1]) ** 2 + HUBER_M**2) - HUBER_M
     weight = b.cfg.weights.goal + (b.cfg.weights.goal_terminal if k == b.sz.h else 0.0)
     b.cost += weight * hub

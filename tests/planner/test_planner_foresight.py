@@ -93,34 +93,6 @@ def test_the_planner_heads_for_the_searched_point() -> None:
     assert planner.foresight.nearest_m == np.inf
 
 
-def test_the_reference_is_the_searched_way_in_time_then_the_subgoal() -> None:
-    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
-    pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
-    s = _search()
-    sub = s.subgoal(np.zeros(2), np.array([6.0, 0.0]), pred, None)
-    times = 0.4 * np.arange(1, 16)  # 6 s: past the subgoal's time (lead_s 4 s)
-    ref = s.reference(sub, times)
-    assert np.allclose(ref[:10], s.last_path[1:11])  # the sets' times are the knots' here: the path's own points
-    assert np.allclose(ref[9:], sub)  # at the subgoal's time and after it
-    mid = s.reference(sub, np.array([0.6]))[0]
-    assert np.allclose(mid, 0.5 * (s.last_path[1] + s.last_path[2]))  # linear between the sets' times
-    s.subgoal(np.zeros(2), np.array([6.0, 0.0]), None, None)  # nobody: no way searched, the target at every time
-    assert np.allclose(s.reference(np.array([6.0, 0.0]), times), [6.0, 0.0])
-
-
-def test_tracking_the_way_plans_closer_to_it_than_heading_for_its_subgoal() -> None:
-    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
-    pred = _walkers(start, np.tile([0.0, 1.0], (8, 1)))
-    gaps = {}
-    for track in (False, True):
-        planner = MPCPlanner(MPCConfig(solver="ipopt", foresight=ForesightConfig(track_path=track)))
-        result = planner.plan(np.zeros(5), np.array([10.0, 0.0]), pred)
-        assert result.status == "solved"
-        ref = planner.foresight.reference(result.subgoal, 0.4 * np.arange(1, 11))
-        gaps[track] = float(np.linalg.norm(result.states[1:, :2] - ref, axis=1).mean())
-    assert gaps[True] < 0.6 * gaps[False]
-
-
 def _oncoming_line() -> PedPrediction:
     """A line of walkers 0.5 m apart across y in [-7, 7], 2.5 m ahead of the robot, walking at it at 0.6 m/s: no way
     through or round within the view, so the search backs away before it."""
@@ -174,33 +146,3 @@ def test_disc_cells_match_a_brute_force_check_on_and_off_the_grid() -> None:
     d = np.linalg.norm(xy[None, None] - centres[:, :, None, None], axis=-1)  # (T, S, G0, G1)
     assert np.array_equal(got, np.any(d < clear[:, :, None, None], axis=1))
     assert got.any() and not got.all()
-
-
-
-def _file_crossing() -> PedPrediction:
-    start = np.stack([np.full(8, 3.0), -2.0 - 0.8 * np.arange(8)], axis=1)
-    return _walkers(start, np.tile([0.0, 1.0], (8, 1)))
-
-
-def test_a_followed_path_is_kept_stitched_and_dropped_when_people_meet_it() -> None:
-    target, pred = np.array([6.0, 0.0]), _file_crossing()
-    s = _search(follow_s=1.0, call_period_s=0.1)
-    s.subgoal(np.zeros(2), target, pred, None)
-    first = s.last_path
-    assert first is not None
-    # 0.1 s later, the robot where the path has it then, the same people (0.1 s on): the same path, followed
-    later = _walkers(pred.current + 0.1 * np.array([0.0, 1.0]), np.tile([0.0, 1.0], (8, 1)))
-    here = first[0] + 0.25 * (first[1] - first[0])
-    sub = s.subgoal(here, target, later, None)
-    assert s.last_path is first
-    ref = s.reference(sub, np.array([0.3]))[0]
-    assert np.allclose(ref, first[1])  # 0.1 s along plus 0.3 s: the path's point at 0.4 s
-    # someone now stands on the followed path 1.2 s ahead: searched again, from where the path has the robot
-    blocker = _walkers(np.vstack([later.current, first[4]]), np.vstack([np.tile([0.0, 1.0], (8, 1)), [[0.0, 0.0]]]))
-    s.subgoal(here, target, blocker, None)
-    assert s.last_path is not first and s.last_path is not None
-    assert np.allclose(s.last_path[0], first[0] + 0.5 * (first[1] - first[0]))  # stitched: 0.2 s along it
-    # the robot 1 m off the path: a new search from the robot itself
-    off = here + np.array([0.0, 1.0])
-    s.subgoal(off, target, blocker, None)
-    assert s.last_path is not None and np.allclose(s.last_path[0], off)
