@@ -9,6 +9,7 @@ ratio, and how many solutions are the same bit for bit (all of them, or the comp
     python bench/bench_mpc_jit.py               # 3 episodes, ~1,000 solves, about 3 minutes plus one compile
     python bench/bench_mpc_jit.py --quick       # 1 episode
     python bench/bench_mpc_jit.py --cell crossing-high-invisible
+    python bench/bench_mpc_jit.py --flags=-O2   # also the NLP compiled with other compiler flags, side by side
 
 The compiled solver comes from the cache (`CROWDNAV_CACHE_DIR`) or is compiled first (~30 s, not timed).
 """
@@ -65,15 +66,22 @@ def record_problems(cell: str, episodes: int) -> tuple[list[dict], object]:
     return recorder.calls, config.mpc
 
 
-def solvers(mpc) -> tuple[ca.Function, ca.Function]:
-    """The virtual-machine solver and the compiled one for `mpc`."""
-    built = {}
-    for mode in ("off", "on"):
-        os.environ[jit.JIT_ENV] = mode
+def solvers(mpc, flags: tuple[str, ...] | None = None) -> dict[str, ca.Function]:
+    """The virtual-machine solver and the compiled one for `mpc` (and, with `flags`, one compiled with those compiler
+    flags instead of `jit.FLAGS`), by name."""
+    built, default = {}, jit.FLAGS
+    runs = [("virtual machine", "off", default), ("compiled", "on", default)]
+    if flags:
+        runs.append((f"compiled {' '.join(flags)}", "on", flags))
+    try:
+        for name, mode, use in runs:
+            os.environ[jit.JIT_ENV], jit.FLAGS = mode, tuple(use)
+            shared_ocp.cache_clear()
+            built[name] = shared_ocp(mpc).solver
+    finally:
+        jit.FLAGS = default
         shared_ocp.cache_clear()
-        built[mode] = shared_ocp(mpc).solver
-    shared_ocp.cache_clear()
-    return built["off"], built["on"]
+    return built
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="1 episode")
     ap.add_argument("--episodes", type=int, default=3)
     ap.add_argument("--cell", default="corridor-high-visible", help="a crowdnav-v1 cell")
+    ap.add_argument("--flags", default=None, metavar="'FLAG ...'",
+                    help=f"also compile with these C compiler flags, e.g. --flags=-O2 (default build: "
+                         f"{' '.join(jit.FLAGS)})")
     args = ap.parse_args(argv)
     if jit.compiler() is None:
         raise SystemExit("bench_mpc_jit: no C compiler (gcc or cc) on PATH: nothing to compare")
@@ -88,18 +99,19 @@ def main(argv: list[str] | None = None) -> int:
     previous = os.environ.get(jit.JIT_ENV)
     os.environ[jit.JIT_ENV] = "off"  # record on the virtual machine
     calls, mpc = record_problems(args.cell, 1 if args.quick else args.episodes)
-    vm, compiled = solvers(mpc)
+    built = solvers(mpc, tuple(args.flags.split()) if args.flags else None)
     if previous is None:
         os.environ.pop(jit.JIT_ENV)
-    times = {"virtual machine": [], "compiled": []}
-    same = 0
+    times = {name: [] for name in built}
+    same = dict.fromkeys(built, 0)
     for call in calls:
         out = {}
-        for name, solver in (("virtual machine", vm), ("compiled", compiled)):
+        for name, solver in built.items():
             start = time.perf_counter()
             out[name] = solver(**call)["x"].full()
             times[name].append(time.perf_counter() - start)
-        same += int(np.array_equal(out["virtual machine"], out["compiled"]))
+        for name in built:
+            same[name] += int(np.array_equal(out["virtual machine"], out[name]))
     print(f"crowdnav-v1 {args.cell}, mpc-gpgraph's {len(calls)} solver calls ({1 if args.quick else args.episodes} "
           f"episodes, seeds {SEED0}+), each solved by both, alternating; {platform.processor() or 'cpu'}, "
           f"Python {platform.python_version()}, CasADi {ca.__version__}")
@@ -109,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     ref = np.array(times["virtual machine"]) * 1e3
     for name, t in times.items():
         t = np.array(t) * 1e3
-        equal = "(the reference)" if name == "virtual machine" else f"{same} of {len(calls)}"
+        equal = "(the reference)" if name == "virtual machine" else f"{same[name]} of {len(calls)}"
         p50, p95 = np.percentile(t, 50), np.percentile(t, 95)
         print(f"| {name} | {p50:.2f} | {p95:.2f} | {t.max():.2f} | {p50 / np.percentile(ref, 50):.3f} | "
               f"{p95 / np.percentile(ref, 95):.3f} | {equal} |")
