@@ -190,8 +190,6 @@ class MPCConfig:
     time_budget_s: float = 0.2  # wall-time budget of one solve; over it counts as a timeout
     max_iter: int = 100  # solver iterations
     tolerance: float = 1e-4  # solver convergence tolerance
-    # the interior-point solver's initial barrier parameter (mu_init); None: fatrop's own default, IPOPT's 1e-3
-    barrier_init: float | None = None
     # Reject (fall back from) a plan whose first step violates a clearance by more than this, m;
     # inf (default) trusts the soft constraints. Starts in collision are always rejected.
     max_slack_m: float = float("inf")
@@ -234,8 +232,6 @@ class MPCConfig:
                                "max_group_span_m", "time_budget_s", "max_iter", "tolerance"))
         if self.wall_margin_m is not None:
             _check_non_negative(self, ("wall_margin_m",))
-        if self.barrier_init is not None:
-            _check_positive(self, ("barrier_init",))
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))

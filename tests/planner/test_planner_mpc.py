@@ -10,7 +10,6 @@ import pytest
 from planner_helpers import PRED, STEP_S, drive, make_config
 
 from planner import (
-    MPCConfig,
     MPCPlanner,
     PedPrediction,
     RobotConfig,
@@ -317,22 +316,3 @@ def test_more_starts_never_keep_a_costlier_plan(goal):
     assert r3.iterations >= r1.iterations  # it ran more solves
     with pytest.raises(ValueError, match="n_starts"):
         make_config(n_starts=0)
-
-
-@pytest.mark.parametrize("solver", SOLVERS)
-def test_the_initial_barrier_reaches_the_solver_and_keeps_its_answer(solver, goal):
-    """barrier_init (mu_init) changes the solver's path to the optimum (its iterations), not the optimum."""
-    pred = frozen_prediction(np.array([[3.0, 0.2], [4.0, -0.4]]), radii=np.array([0.3, 0.3]), **PRED)
-    out = {}
-    for mu in (None, 3.0):
-        result = MPCPlanner(make_config(solver=solver, barrier_init=mu)).plan(np.zeros(5), goal, pred)
-        assert result.status == "solved"
-        out[mu] = result
-    assert out[None].iterations != out[3.0].iterations
-    assert np.allclose(out[None].states, out[3.0].states, atol=5e-3)
-
-
-@pytest.mark.parametrize("value", [0.0, -1.0, float("nan")])
-def test_a_non_positive_initial_barrier_is_refused(value):
-    with pytest.raises(ValueError, match="barrier_init"):
-        MPCConfig(barrier_init=value)
