@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in built:
             same[name] += int(np.array_equal(out["virtual machine"], out[name]))
     print(f"crowdnav-v1 {args.cell}, mpc-gpgraph's {len(calls)} solver calls ({1 if args.quick else args.episodes} "
-          f"episodes, seeds {SEED0}+), each solved by both, alternating; {platform.processor() or 'cpu'}, "
+          f"episodes, seeds {SEED0}+), each solved by every solver in turn; {platform.processor() or 'cpu'}, "
           f"Python {platform.python_version()}, CasADi {ca.__version__}")
     print("| solver | p50 (ms) | p95 (ms) | max (ms) | p50 / VM | p95 / VM "
           "| solutions equal to the VM's, bit for bit |")

@@ -48,10 +48,7 @@ from envs.atomic import write_json_atomic
 from envs.rl.config import LAGRANGE_FIELDS, TrainConfig
 from envs.rl.cost import wrap_for_cost
 from envs.rl.setting import TRAIN_SEED_OFFSET
-from envs.rl.train_args import BOOL_HELP, FLAG_HELP, add_arguments, check_demos, config_from_args
-
-__all__ = ["BOOL_HELP", "FLAG_HELP", "TrainConfig", "add_arguments", "check_demos", "config_from_args", "main",
-           "make_model", "make_vec_env", "train"]
+from envs.rl.train_args import add_arguments, config_from_args
 
 
 # ------------------------------------------------------------------------------------------ the run
