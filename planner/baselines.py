@@ -43,7 +43,8 @@ class _PredictionSwapMPC:
     def _replace(self, prediction: PedPrediction) -> PedPrediction:
         raise NotImplementedError
 
-    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
+    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None,
+             time_s: float | None = None) -> PlanResult:
         """As :meth:`MPCPlanner.plan`, with the prediction replaced first. An empty scene (N = 0 or no real
         pedestrian) is passed through unchanged; bad input raises ValueError before any work."""
         if prediction is not None:
@@ -51,7 +52,7 @@ class _PredictionSwapMPC:
                          self.mpc.config.dt_s)
             if np.asarray(prediction.mask, bool).any():
                 prediction = self._replace(prediction)
-        return self.mpc.plan(robot_state, goal, prediction, obstacles)
+        return self.mpc.plan(robot_state, goal, prediction, obstacles, time_s)
 
 
 class ConstantVelocityMPC(_PredictionSwapMPC):
@@ -116,7 +117,9 @@ class SocialForcePlanner:
     def reset(self) -> None:
         """Stateless; present for interface parity."""
 
-    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
+    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None,
+             time_s: float | None = None) -> PlanResult:
+        """As :meth:`MPCPlanner.plan` (time_s unused)."""
         dims = model_dims(self.config.robot.model)
         state, goal, prediction, obstacles = check_inputs(robot_state, goal, prediction, obstacles,
                                                           dims.state_dim, self.config.dt_s)
