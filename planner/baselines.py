@@ -43,8 +43,7 @@ class _PredictionSwapMPC:
     def _replace(self, prediction: PedPrediction) -> PedPrediction:
         raise NotImplementedError
 
-    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None,
-             time_s: float | None = None) -> PlanResult:
+    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
         """As :meth:`MPCPlanner.plan`, with the prediction replaced first. An empty scene (N = 0 or no real
         pedestrian) is passed through unchanged; bad input raises ValueError before any work."""
         if prediction is not None:
@@ -52,7 +51,7 @@ class _PredictionSwapMPC:
                          self.mpc.config.dt_s)
             if np.asarray(prediction.mask, bool).any():
                 prediction = self._replace(prediction)
-        return self.mpc.plan(robot_state, goal, prediction, obstacles, time_s)
+        return self.mpc.plan(robot_state, goal, prediction, obstacles)
 
 
 class ConstantVelocityMPC(_PredictionSwapMPC):
@@ -117,9 +116,7 @@ class SocialForcePlanner:
     def reset(self) -> None:
         """Stateless; present for interface parity."""
 
-    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None,
-             time_s: float | None = None) -> PlanResult:
-        """As :meth:`MPCPlanner.plan` (time_s unused)."""
+    def plan(self, robot_state, goal, prediction: PedPrediction | None = None, obstacles=None) -> PlanResult:
         dims = model_dims(self.config.robot.model)
         state, goal, prediction, obstacles = check_inputs(robot_state, goal, prediction, obstacles,
                                                           dims.state_dim, self.config.dt_s)

@@ -151,25 +151,18 @@ class ForesightConfig:
     # a subgoal farther from the goal than the nearest the robot has come to it (this episode) plus this is not
     # taken: the robot holds where it is instead of backing away with an oncoming flow; inf: no bound
     retreat_m: float = 2.0
-    # patience: where the search has steered (a subgoal other than the target) and the robot's nearest approach to its
-    # goal has not improved by progress_m for patience_s, the MPC gets the target for release_s (a hold before a flow
-    # that never ends becomes the MPC's own crossing); inf: never. Needs the episode's time (`plan(time_s=...)`)
-    patience_s: float = math.inf
-    release_s: float = 4.0
-    progress_m: float = 0.5
 
     def __post_init__(self) -> None:
-        _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s", "release_s", "progress_m"))
+        _check_positive(self, ("horizon_s", "step_s", "cell_m", "goal_reach_m", "lead_s"))
         if not 0.0 < self.speed_fraction <= 1.0:
             raise ValueError(f"ForesightConfig.speed_fraction must be in (0, 1], got {self.speed_fraction!r}")
         _check_non_negative(self, ("clearance_m", "spread_inflation", "max_inflation_m"))
         for name in ("horizon_s", "step_s", "cell_m", "clearance_m", "spread_inflation", "max_inflation_m",
-                     "goal_reach_m", "lead_s", "release_s", "progress_m"):
+                     "goal_reach_m", "lead_s"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"ForesightConfig.{name} must be finite, got {getattr(self, name)!r}")
-        for name in ("retreat_m", "patience_s"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"ForesightConfig.{name} must be >= 0 (inf: off), got {getattr(self, name)!r}")
+        if not self.retreat_m >= 0:
+            raise ValueError(f"ForesightConfig.retreat_m must be >= 0 (inf: off), got {self.retreat_m!r}")
         if self.horizon_s < self.step_s:
             raise ValueError(f"ForesightConfig.horizon_s must be >= step_s, got {self.horizon_s} < {self.step_s}")
 

@@ -25,15 +25,10 @@ against the prediction:
    not taken: the robot holds where it is. In a corridor's oncoming flow the sets are pushed back by everyone walking
    at the robot, and the search would have it walk back with them for good (crowdnav-tune corridor-high-visible 1002:
    from 8.8 m to 16 m from the goal); a step back to let a crossing file pass stays within the bound.
-7. Patience (given the episode's time): where the search has steered the robot (a subgoal other than the target)
-   while its nearest approach to the goal has not improved by `progress_m` for `patience_s`, the target is returned
-   for `release_s`: the MPC's own crossing instead of a hold before a flow that never ends (crowdnav-v1-check
-   crossing-high-visible 5005: held at the start for 18 s). The clock then starts again.
 
 Units: metres, seconds. numpy and scipy (imported on first use); its state is `last_path`, the searched path (P, 2) m
 of the last call (None when the target was returned without one), for drawing, and `nearest_m`, the nearest approach
-to the goal since `reset` (a new episode), with the patience clock (`mark_m` / `mark_s`: the nearest approach and the
-time it last improved by `progress_m`; `release_until_s`).
+to the goal since `reset` (a new episode).
 """
 
 from __future__ import annotations
@@ -60,40 +55,20 @@ class ForesightSearch:
         self.robot_radius_m = float(robot_radius_m)
         self.wall_clearance_m = float(wall_clearance_m)
         self.last_path: np.ndarray | None = None
-        self.reset()
+        self.nearest_m = math.inf  # the nearest the robot has come to its goal since `reset` (retreat_m)
 
     def reset(self) -> None:
-        """Forget the episode: the nearest approach to the goal and the patience clock."""
-        self.nearest_m, self.last_path = math.inf, None  # the nearest the robot has come to its goal (retreat_m)
-        self.mark_m, self.mark_s, self.release_until_s = math.inf, -math.inf, -math.inf  # patience (step 7)
+        """Forget the episode: the nearest approach to the goal."""
+        self.nearest_m, self.last_path = math.inf, None
 
     def subgoal(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
-                walls: np.ndarray | None, goal: np.ndarray | None = None, time_s: float | None = None) -> np.ndarray:
+                walls: np.ndarray | None, goal: np.ndarray | None = None) -> np.ndarray:
         """The point (2,) m to head for from position (2,) towards target (2,), or the target itself. goal (2,) m:
-        the episode's goal where target is a waypoint to it (the route's), for `retreat_m`; default target. time_s:
-        the episode's time, s, for `patience_s` (None: no patience)."""
+        the episode's goal where target is a waypoint to it (the route's), for `retreat_m`; default target."""
+        self.last_path = None
         position, target = np.asarray(position, float), np.asarray(target, float)
         goal = target if goal is None else np.asarray(goal, float)
         self.nearest_m = min(self.nearest_m, float(np.hypot(*(position - goal))))
-        if time_s is None or not math.isfinite(self.config.patience_s):
-            return self._search(position, target, prediction, walls, goal)
-        if self.nearest_m < self.mark_m - self.config.progress_m:
-            self.mark_m, self.mark_s = self.nearest_m, time_s
-        if time_s < self.release_until_s:
-            self.last_path = None
-            return target
-        subgoal = self._search(position, target, prediction, walls, goal)
-        if subgoal is not target and time_s - self.mark_s >= self.config.patience_s:
-            self.release_until_s = time_s + self.config.release_s
-            self.mark_m, self.mark_s = self.nearest_m, self.release_until_s  # the clock starts again after it
-            self.last_path = None
-            return target
-        return subgoal
-
-    def _search(self, position: np.ndarray, target: np.ndarray, prediction: PedPrediction | None,
-                walls: np.ndarray | None, goal: np.ndarray) -> np.ndarray:
-        """Steps 1-6 of the module docstring; `target` itself (the same object) where the MPC keeps it."""
-        self.last_path = None
         if prediction is None or not np.any(prediction.mask):
             return target
         cfg = self.config

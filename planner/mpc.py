@@ -121,11 +121,10 @@ class MPCPlanner:
             self.foresight.reset()
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
-             obstacles: np.ndarray | list | None = None, time_s: float | None = None) -> PlanResult:
+             obstacles: np.ndarray | list | None = None) -> PlanResult:
         """Plan from robot_state (state_dim,) to goal (2,) m among predicted pedestrians (absolute
         positions, see :class:`PedPrediction`; None = nobody) and obstacles (segments (S, 4) m, or a list
-        of polygons (V, 2) m; None = none); time_s: the episode's time, s (only the foresight search's patience
-        reads it; None: unknown). Returns the first control and the plan (:class:`PlanResult`).
+        of polygons (V, 2) m; None = none). Returns the first control and the plan (:class:`PlanResult`).
         Raises ValueError on malformed or non-finite input, before any solver work; never otherwise."""
         called = time.perf_counter()
         state, goal, prediction, obstacles = check_inputs(robot_state, goal, prediction, obstacles,
@@ -135,7 +134,7 @@ class MPCPlanner:
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
         routed = time.perf_counter()
         try:
-            subgoal = self._subgoal(state, goal, prediction, obstacles, time_s)
+            subgoal = self._subgoal(state, goal, prediction, obstacles)
             routed = time.perf_counter() - routed
             result = self._solve(state, subgoal, prediction, obstacles)
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
@@ -148,14 +147,14 @@ class MPCPlanner:
         return result
 
     def _subgoal(self, state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
-                 obstacles: np.ndarray | None, time_s: float | None = None) -> np.ndarray:
+                 obstacles: np.ndarray | None) -> np.ndarray:
         """The point the solve heads for: the goal; with a route (``config.route``) and walls, the route's subgoal
         (planner/route.py); with the foresight search (``config.foresight``), a point on its way to that one."""
         subgoal = goal
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
         if self.foresight is not None:
-            subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles, goal, time_s)
+            subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles, goal)
         return subgoal
 
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:

@@ -196,7 +196,6 @@ class PlannerPolicy:
         self.replan_every_steps = replan_every_steps
         self._control: np.ndarray | None = None
         self._age = 0
-        self._time_s = 0.0  # the episode's time at the next call, s (the planner's `time_s`)
 
     @property
     def stats(self) -> PlanStats:
@@ -204,16 +203,15 @@ class PlannerPolicy:
 
     def reset(self, seed: int | None = None) -> None:
         self.planner.reset()
-        self._control, self._time_s = None, 0.0
+        self._control = None
 
     def act(self, view: PolicyView) -> Decision:
-        time_s, self._time_s = self._time_s, self._time_s + view.dt_s
         if self._control is not None and self._age < self.replan_every_steps:
             self._age += 1
             return Decision(control=self._control)  # hold the plan; the frames keep its annotations
         self._age = 1
         prediction = self._predict(view)
-        result = self.planner.plan(view.robot_state, view.goal, prediction, view.walls, time_s=time_s)
+        result = self.planner.plan(view.robot_state, view.goal, prediction, view.walls)
         self._control = result.control
         samples = prediction.positions if prediction.n_peds else None
         options = np.array([o[:, :2] for o in result.options[1:]]) if len(result.options) > 1 else None

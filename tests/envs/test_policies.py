@@ -40,22 +40,6 @@ def test_mpc_replans_at_its_interval_and_holds_the_control_in_between(every):
     assert len(res.solve_times_ms) == res.metrics["plans"] - res.metrics["fallbacks"]
 
 
-def test_a_planner_policy_gives_its_planner_the_episode_time_from_each_reset():
-    env = CrowdNavEnv(replace(CFG, time_limit_s=4.0))
-    policy = make_policy("mpc-cv", env)
-    policy.replan_every_steps = 3
-    seen: list[float] = []
-    plan = policy.planner.plan
-    policy.planner.plan = lambda *a, time_s=None, **k: (seen.append(time_s), plan(*a, time_s=time_s, **k))[1]
-    for seed in (0, 0):
-        env.reset(seed=seed)
-        policy.reset(seed)
-        for _ in range(7):
-            env.step_decision(policy.act(env.view()))
-    dt = env.config.dt_s
-    assert seen == pytest.approx([0.0, 3 * dt, 6 * dt] * 2)
-
-
 def test_mpc_gpgraph_uses_the_models_groups_and_samples():
     env = CrowdNavEnv(replace(CFG, time_limit_s=2.0))
     policy = make_policy("mpc-gpgraph", env)

@@ -126,49 +126,9 @@ def test_the_retreat_is_measured_from_the_episode_goal_not_the_waypoint() -> Non
     assert s.subgoal(np.zeros(2), waypoint, line, None, goal=goal)[0] < -1.0
 
 
-def test_patience_hands_the_mpc_its_target_after_a_hold_then_the_clock_starts_again() -> None:
-    target, line = np.array([10.0, 0.0]), _oncoming_line()
-    s = _search(retreat_m=0.5, patience_s=2.0, release_s=1.0)
-    here = np.zeros(2)
-    times = np.round(0.4 * np.arange(12), 6)  # 0 .. 4.4 s, the robot standing still
-    got = [s.subgoal(here, target, line, None, time_s=t) for t in times]
-    held = [np.array_equal(g, here) for g in got]
-    released = [g is target for g in got]
-    # held until 2 s without progress, then the target for 1 s (2.0, 2.4, 2.8), then held again for 2 s from 3 s on
-    assert held == [True] * 5 + [False] * 3 + [True] * 4
-    assert released == [False] * 5 + [True] * 3 + [False] * 4
-    assert s.last_path is not None  # after the release the search runs again
-    # no time (or no patience): the hold is kept for ever
-    assert np.array_equal(s.subgoal(here, target, line, None), here)
-    forever = _search(retreat_m=0.5)
-    assert all(np.array_equal(forever.subgoal(here, target, line, None, time_s=t), here) for t in times)
-
-
-def test_progress_towards_the_goal_restarts_the_patience_clock_and_reset_forgets_it() -> None:
-    target, line = np.array([10.0, 0.0]), _oncoming_line()
-    s = _search(retreat_m=0.5, patience_s=2.0, progress_m=0.5)
-    for i, t in enumerate(np.round(0.4 * np.arange(10), 6)):  # 0.6 m nearer the goal every 1.2 s
-        here = np.array([0.6 * (i // 3), 0.0])
-        assert s.subgoal(here, target, line, None, time_s=t) is not target
-    s.reset()
-    assert (s.mark_m, s.mark_s, s.release_until_s) == (np.inf, -np.inf, -np.inf)
-
-
-def test_the_planner_passes_the_episode_time_to_the_search() -> None:
-    cfg = MPCConfig(solver="ipopt", foresight=ForesightConfig(retreat_m=0.5, patience_s=0.0))
-    planner = MPCPlanner(cfg)
-    target = np.array([10.0, 0.0])
-    held = planner.plan(np.zeros(5), target, _oncoming_line())  # no time: the search's hold
-    assert np.allclose(held.subgoal, 0.0)
-    released = planner.plan(np.zeros(5), target, _oncoming_line(), time_s=0.4)  # patience 0: released at once
-    assert np.allclose(released.subgoal, target)
-
-
 @pytest.mark.parametrize("field,value", [("horizon_s", 0.0), ("step_s", -1.0), ("speed_fraction", 1.5),
                                          ("clearance_m", -0.1), ("cell_m", float("nan")), ("horizon_s", 0.2),
-                                         ("retreat_m", -1.0), ("retreat_m", float("nan")), ("patience_s", -1.0),
-                                         ("patience_s", float("nan")), ("release_s", 0.0), ("progress_m", -0.5),
-                                         ("release_s", float("inf"))])
+                                         ("retreat_m", -1.0), ("retreat_m", float("nan"))])
 def test_config_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         ForesightConfig(**{field: value})
