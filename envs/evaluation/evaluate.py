@@ -36,12 +36,18 @@ class Interrupted(KeyboardInterrupt):
     was done and what of it was kept. Still a KeyboardInterrupt, so code that stops on Ctrl-C keeps doing so."""
 
 
+# packages whose code runs as callbacks from C, where a raised exception is printed and dropped: CasADi polls for
+# signals during a solve; pymunk's cffi callbacks (collision handlers, the finaliser that frees a space) print
+# "Exception ignored ... Traceback" (a CI run's Ctrl-C test, 2026-11-29)
+CALLBACK_PACKAGES = tuple(f"{os.sep}{name}{os.sep}" for name in ("casadi", "pymunk"))
+
+
 class CtrlC:
     """While entered (in the main thread, under Python's default Ctrl-C handling): Ctrl-C raises KeyboardInterrupt
-    as usual, except inside a CasADi solve, where it is only remembered and stops the run when the running episode
-    ends (`check`; that episode is kept). CasADi polls for signals during a solve, and an interrupt raised there
-    is printed ("KeyboardInterrupt") and dropped: in a one-process run about a third of all Ctrl-C presses landed
-    there and were lost."""
+    as usual, except inside a `CALLBACK_PACKAGES` callback (a CasADi solve, a pymunk finaliser), where it is only
+    remembered and stops the run when the running episode ends (`check`; that episode is kept). An interrupt raised
+    there is printed and dropped: in a one-process run about a third of all Ctrl-C presses landed in a solve and were
+    lost."""
 
     def __init__(self) -> None:
         self.pressed = False
@@ -55,7 +61,7 @@ class CtrlC:
 
     def _handle(self, signum: int, frame: Any) -> None:
         self.pressed = True
-        if frame is None or f"{os.sep}casadi{os.sep}" not in frame.f_code.co_filename:
+        if frame is None or not any(p in frame.f_code.co_filename for p in CALLBACK_PACKAGES):
             raise KeyboardInterrupt
 
     def check(self) -> None:

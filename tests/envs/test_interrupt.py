@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -17,6 +18,7 @@ import envs.evaluation.evaluate as evaluate_module
 from envs.cli import main
 from envs.evaluation.benchmark import RECORDS
 from envs.evaluation.episode import run_task
+from envs.evaluation.evaluate import CtrlC
 from envs.evaluation.records import read_records
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,6 +40,24 @@ def _one_line(capsys) -> str:
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and "Traceback" not in out + err, err
     return lines[0]
+
+
+@pytest.mark.parametrize(("where", "raises"), [("/x/site-packages/casadi/casadi.py", False),
+                                               ("/x/site-packages/pymunk/space.py", False),
+                                               ("/repo/envs/env.py", True), ("/x/site-packages/numpy/core.py", True)])
+def test_ctrl_c_is_remembered_not_raised_inside_callbacks_from_c(where, raises):
+    """Inside CasADi's solve or a pymunk callback a raised KeyboardInterrupt would be printed and dropped: there the
+    press is only remembered (and `check` raises it); elsewhere it raises at once."""
+    frame = SimpleNamespace(f_code=SimpleNamespace(co_filename=where.replace("/", os.sep)))
+    ctrl = CtrlC()
+    if raises:
+        with pytest.raises(KeyboardInterrupt):
+            ctrl._handle(signal.SIGINT, frame)
+    else:
+        ctrl._handle(signal.SIGINT, frame)
+        with pytest.raises(KeyboardInterrupt):
+            ctrl.check()
+    assert ctrl.pressed
 
 
 def test_ctrl_c_in_benchmark_keeps_the_finished_episodes_and_the_rerun_resumes(tmp_path, capsys, monkeypatch):
