@@ -74,3 +74,55 @@ def test_robot_steps_aside_for_a_pedestrian_from_behind():
     gap, side = _closed_loop(cfg, walkers)
     assert gap > R_SUM
     assert side > R_SUM  # stepped out of the walker's way rather than trying to outrun it
+
+
+def _stage_slack(cfg: MPCConfig, pred: PedPrediction, offset: np.ndarray, stage: int) -> float:
+    """The pedestrians' smallest feasible slack (m) at `stage` (1..H) of a plan whose knots all sit at `offset` (2,) m
+    from the one pedestrian's predicted position at that knot (the OCP's own slack function)."""
+    from planner.ocp import pack_params
+
+    planner = MPCPlanner(cfg)
+    ocp, layout = planner.ocp, planner.ocp.layout
+    scene = build_scene(np.zeros(5), pred, None, cfg)
+    p = pack_params(ocp.sizes, np.zeros(5), GOAL, scene)
+    states = np.zeros((cfg.horizon_steps + 1, 5))
+    states[1:, :2] = scene.ped_pos[:, 0, 0] + offset
+    w = np.zeros(layout.n)
+    w[layout.z] = states
+    return float(ocp.slack_fn(w, p).full().reshape(layout.s.shape)[stage, 0])
+
+
+def test_lateral_inflation_makes_a_walkers_clearance_an_ellipse():
+    """With lateral_inflation 0.5 a walker's 4 s clearance (inflation 0.5 m) is 0.9 + 0.5 m ahead of and behind them
+    and 0.9 + 0.25 m beside them; at 1.0 a disc of 1.4 m, as before."""
+    walker = _scene(0.0, [([3.0, 0.0], [-1.2, 0.0])])  # walking -x, constant velocity (one sample: no spread)
+    base = R_SUM + 0.3
+    ellipse = MPCConfig(safety_margin_m=0.3, clearance_growth_mps=0.2, max_clearance_inflation_m=0.5,
+                        lateral_inflation=0.5, max_groups=0, max_walls=0, time_budget_s=10.0)
+    disc = replace(ellipse, lateral_inflation=1.0)
+    h = ellipse.horizon_steps
+    beside, ahead = np.array([0.0, 1.0]), np.array([1.0, 0.0])
+    assert _stage_slack(ellipse, walker, (base + 0.25 - 0.05) * beside, h) == pytest.approx(0.05, abs=2e-3)
+    assert _stage_slack(ellipse, walker, (base + 0.25 + 0.02) * beside, h) == 0.0
+    assert _stage_slack(disc, walker, (base + 0.25 + 0.02) * beside, h) == pytest.approx(0.23, abs=2e-3)
+    # along the walk the margin is measured in the across axis's metres: zero at base + 0.5, positive inside
+    assert _stage_slack(ellipse, walker, (base + 0.5 + 0.02) * ahead, h) == 0.0
+    assert _stage_slack(ellipse, walker, -(base + 0.5 + 0.02) * ahead, h) == 0.0
+    assert _stage_slack(ellipse, walker, (base + 0.5 - 0.1) * ahead, h) > 0.05
+    assert _stage_slack(disc, walker, (base + 0.5 - 0.1) * ahead, h) == pytest.approx(0.1, abs=2e-3)
+
+
+def test_a_standing_person_keeps_a_round_clearance_and_the_default_adds_no_parameter():
+    cfg = replace(CROWD_MPC, lateral_inflation=0.5)
+    still = build_scene(np.zeros(5), _scene(0.0, [([3.0, 0.0], [0.0, 0.0])]), None, cfg)
+    assert np.all(still.ped_axis == 0.0)
+    assert np.allclose(still.ped_clear[:, 0], build_scene(np.zeros(5), _scene(0.0, [([3.0, 0.0], [0.0, 0.0])]),
+                                                          None, CROWD_MPC).ped_clear[:, 0])
+    assert build_scene(np.zeros(5), _scene(0.0, [([3.0, 0.0], [1.0, 0.0])]), None, CROWD_MPC).ped_axis is None
+    assert not MPCPlanner(make_config()).ocp.sizes.aniso
+
+
+@pytest.mark.parametrize("share", [0.0, 1.5, float("nan")])
+def test_lateral_inflation_outside_its_range_is_refused(share):
+    with pytest.raises(ValueError, match="lateral_inflation"):
+        MPCConfig(lateral_inflation=share)
