@@ -203,10 +203,6 @@ class MPCConfig:
     clearance_growth_mps: float = 0.0  # clearance added per second of prediction time, m/s
     spread_inflation: float = 0.0  # clearance added per metre of sample spread (RMS about the mean), m/m
     max_clearance_inflation_m: float = 0.5  # cap on the two inflations above, m
-    # share of those inflations kept across a walking person's predicted direction (their samples spread about twice
-    # as far along it as across it): 1.0 (default) a disc, as before 2026-11-29; < 1 an ellipse, the full inflation
-    # ahead of and behind them, this share of it beside them (planner/scene.py, planner/ocp.py)
-    lateral_inflation: float = 1.0
     # -- safety shield (planner/shield.py); shield_horizon_s = 0 (default) turns it off ---------------------
     # The plan's first control is checked against every predicted sample at the control rate; if more than
     # shield_max_risk of the samples come within shield_margin_m within shield_horizon_s, a safer constant
@@ -239,8 +235,6 @@ class MPCConfig:
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))
-        if not 0.0 < self.lateral_inflation <= 1.0:
-            raise ValueError(f"MPCConfig.lateral_inflation must be in (0, 1], got {self.lateral_inflation!r}")
         _check_positive(self, ("shield_dt_s", "shield_tau_s"))
         _check_non_negative(self, ("shield_horizon_s", "shield_margin_m"))
         if not 0.0 <= self.shield_max_risk <= 1.0:

@@ -62,15 +62,13 @@ class Sizes:
     w: int
     sub: int
     sides: bool = False  # guidance on: the pedestrians' constraints may be half-planes (planner/guidance.py)
-    aniso: bool = False  # lateral_inflation < 1: the pedestrians' clearances are ellipses (`ped_axis`)
 
     @staticmethod
     def from_config(cfg: MPCConfig) -> Sizes:
         dims = model_dims(cfg.robot.model)
         ns = 1 + (1 if cfg.max_groups else 0) + (1 if cfg.max_walls else 0)  # pedestrians, groups, walls
         return Sizes(dims.state_dim, dims.control_dim, ns, cfg.horizon_steps, cfg.max_peds, cfg.n_modes,
-                     cfg.max_groups, cfg.max_walls, 2 if cfg.check_midpoints else 1, cfg.guidance is not None,
-                     cfg.lateral_inflation < 1.0)
+                     cfg.max_groups, cfg.max_walls, 2 if cfg.check_midpoints else 1, cfg.guidance is not None)
 
     @property
     def nt(self) -> int:
@@ -89,8 +87,6 @@ def param_shapes(sz: Sizes) -> dict[str, tuple[int, ...]]:
     }
     if sz.sides:
         shapes.update(ped_normal=(sz.nt, sz.m, sz.k, 2), ped_side=(sz.m,))
-    if sz.aniso:
-        shapes.update(ped_axis=(sz.nt, sz.m, 2))
     return shapes
 
 
@@ -277,18 +273,11 @@ def _collision_terms(b: _Builder, k: int) -> None:
 
 
 def _ped_gap(b: _Builder, pos: ca.SX, t: int, m: int, j: int) -> ca.SX:
-    """Clearance margin (m) of pos from pedestrian m, mode j at checked time t: the distance beyond the clearance.
-    With ellipses (``sz.aniso``) the distance has its component along ``ped_axis`` (the walking direction x
-    sqrt(1 - rho^2), rho = clearance across / along) taken out: the margin is zero on the ellipse whose semi-axes are
-    the clearance across (``ped_clear``) and that / rho along. With guidance, blended by the switch ``ped_side`` (0:
-    that distance, 1: the signed distance beyond the clearance along the half-plane's normal ``ped_normal``,
-    planner/guidance.py)."""
+    """Clearance margin (m) of pos from pedestrian m, mode j at checked time t: the distance beyond the clearance;
+    with guidance, blended by the switch ``ped_side`` (0: that distance, 1: the signed distance beyond the clearance
+    along the half-plane's normal ``ped_normal``, planner/guidance.py)."""
     par, q = b.par, b.par["ped_pos"][t, m, j]
-    d2 = _point_dist2(pos, q)
-    if b.sz.aniso:
-        axis = par["ped_axis"][t, m]
-        d2 = d2 - (axis[0] * (pos[0] - q[0]) + axis[1] * (pos[1] - q[1])) ** 2
-    disc = ca.sqrt(d2 + EPS_DIST_M2) - par["ped_clear"][t, m]
+    disc = ca.sqrt(_point_dist2(pos, q) + EPS_DIST_M2) - par["ped_clear"][t, m]
     if not b.sz.sides:
         return disc
     n, on = par["ped_normal"][t, m, j], par["ped_side"][m]

@@ -32,7 +32,6 @@ from planner.prediction import PedPrediction, current_positions
 from planner.risk import clearance_inflation, resample_scalar, sample_spread
 
 FAR_M = 1.0e3  # padding entries are placed this far from the robot
-WALKING_M = 0.3  # a pedestrian predicted to move less than this over the prediction keeps a round clearance, m
 
 
 @dataclass(frozen=True)
@@ -52,9 +51,6 @@ class SceneArrays:
     wall_side: np.ndarray  # (W,) +1 / -1: the side of each wall's line the robot is on now (left of x1y1->x2y2: +1)
     ped_index: np.ndarray  # (m_real,) which input pedestrians fill the first rows
     start_penetration_m: float  # > 0 when the robot already overlaps a pedestrian or a wall now
-    # (nt, M, 2) with `MPCConfig.lateral_inflation` < 1: each walking pedestrian's direction x sqrt(1 - rho^2), rho
-    # their clearance across / along (ped_clear is then the clearance across; planner/ocp.py `_ped_gap`); None: discs
-    ped_axis: np.ndarray | None = None
 
 
 def _ped_sample_distances(positions: np.ndarray) -> np.ndarray:
@@ -254,34 +250,15 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     ped_pos[:, : order.size] = np.transpose(stage_pos[:, :, order], (1, 2, 0, 3))
     ped_clear = np.full((sub * h, m), cfg.robot.radius_m + cfg.safety_margin_m)
     ped_clear[:, : order.size] += radii[order]
-    ped_axis = np.zeros((sub * h, m, 2)) if cfg.lateral_inflation < 1.0 else None
     if order.size and (cfg.clearance_growth_mps > 0 or cfg.spread_inflation > 0):
         spread = resample_scalar(sample_spread(raw[:, :, order]), pred.step_s, cfg.dt_s / sub, sub * h)
-        extra = clearance_inflation(spread, cfg, cfg.dt_s / sub)
-        if ped_axis is not None:
-            ped_axis[:, : order.size] = ellipse_axes(raw[:, :, order], now[order], ped_clear[:, : order.size], extra,
-                                                     cfg.lateral_inflation)
-            extra = extra * np.where(np.any(ped_axis[:, : order.size] != 0, axis=(0, 2)), cfg.lateral_inflation, 1.0)
-        ped_clear[:, : order.size] += extra
+        ped_clear[:, : order.size] += clearance_inflation(spread, cfg, cfg.dt_s / sub)
     ped_mask = np.zeros(m)
     ped_mask[: order.size] = 1.0
     grp = _group_arrays(stage_pos, radii, groups, robot_xy, cfg)
     walls, wall_mask, wall_side = _nearest_walls(obstacles, robot_xy, cfg.max_walls)
     depth = _start_penetration(robot_xy, now, radii, real, obstacles, cfg.robot.radius_m)
-    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, wall_side, order, depth, ped_axis)
-
-
-def ellipse_axes(positions: np.ndarray, now: np.ndarray, base: np.ndarray, extra: np.ndarray,
-                 share: float) -> np.ndarray:
-    """(nt, n, 2) `SceneArrays.ped_axis` of n pedestrians: their mean predicted direction of walking (the samples'
-    (K, T, n, 2) mean last position less now (n, 2) m; zero for anyone predicted to move less than WALKING_M, who keeps
-    a disc) x sqrt(1 - rho^2), rho = (base + share x extra) / (base + extra) at each checked time, from their clearance
-    without inflation base (nt, n) m and the inflation extra (nt, n) m."""
-    way = positions[:, -1].mean(axis=0) - now
-    length = np.linalg.norm(way, axis=-1)
-    unit = np.where((length > WALKING_M)[:, None], way / np.maximum(length, 1e-9)[:, None], 0.0)
-    rho = (base + share * extra) / (base + extra)
-    return unit[None] * np.sqrt(1.0 - rho**2)[..., None]
+    return SceneArrays(ped_pos, ped_clear, ped_mask, *grp, walls, wall_mask, wall_side, order, depth)
 
 
 def validate_obstacles(obstacles) -> np.ndarray | None:
