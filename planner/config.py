@@ -168,27 +168,6 @@ class ForesightConfig:
 
 
 @dataclass(frozen=True)
-class FollowConfig:
-    """Settings of the follow layer (planner/follow.py): where the robot's lane meets an oncoming flow, the subgoal is
-    behind someone walking its way; metres, seconds, m/s."""
-
-    look_m: float = 5.0  # how far ahead along the way oncoming people and leaders are looked for
-    band_m: float = 0.9  # half-width of a lane (the robot's, a leader's)
-    oncoming_mps: float = 0.3  # walking at the robot faster than this (along the way) is oncoming
-    min_speed_mps: float = 0.5  # a leader walks the robot's way at least this fast
-    max_lateral_m: float = 1.5  # a leader is at most this far from the way's line
-    at_s: float = 4.0  # the subgoal is behind the leader's predicted position this far ahead (the MPC's horizon)
-    gap_m: float = 1.2  # and this far behind it along the way
-
-    def __post_init__(self) -> None:
-        _check_positive(self, ("look_m", "band_m", "max_lateral_m", "at_s", "gap_m"))
-        _check_non_negative(self, ("oncoming_mps", "min_speed_mps"))
-        for name in ("look_m", "band_m", "oncoming_mps", "min_speed_mps", "max_lateral_m", "at_s", "gap_m"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"FollowConfig.{name} must be finite, got {getattr(self, name)!r}")
-
-
-@dataclass(frozen=True)
 class MPCConfig:
     """Sizes, timing and solver choice of the MPC. Sizes are fixed when the problem is built."""
 
@@ -240,8 +219,6 @@ class MPCConfig:
     guidance: GuidanceConfig | None = None
     # -- foresight search (planner/foresight.py); None (default): off ----------------------------------------------
     foresight: ForesightConfig | None = None
-    # -- follow layer (planner/follow.py); None (default): off ---------------------------------------------------
-    follow: FollowConfig | None = None
 
     @property
     def wall_clearance_m(self) -> float:

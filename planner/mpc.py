@@ -10,7 +10,6 @@ import numpy as np
 
 from planner.config import MPCConfig
 from planner.dynamics import brake_control, clip_control, model_dims, step_numpy
-from planner.follow import FollowLayer
 from planner.foresight import ForesightSearch
 from planner.guidance import (
     checked_points,
@@ -111,7 +110,6 @@ class MPCPlanner:
         fs, robot = self.config.foresight, self.config.robot
         self.foresight = None if fs is None else ForesightSearch(fs, robot.max_speed_mps, robot.radius_m,
                                                                  self.config.wall_clearance_m)
-        self.follow = None if self.config.follow is None else FollowLayer(self.config.follow)
 
     def reset(self) -> None:
         """Forget the stored plan (warm start and fallback), the passing options and the route; keep the stats."""
@@ -121,8 +119,6 @@ class MPCPlanner:
             self.router.reset()
         if self.foresight is not None:
             self.foresight.reset()
-        if self.follow is not None:
-            self.follow.reset()
 
     def plan(self, robot_state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None = None,
              obstacles: np.ndarray | list | None = None) -> PlanResult:
@@ -153,14 +149,10 @@ class MPCPlanner:
     def _subgoal(self, state: np.ndarray, goal: np.ndarray, prediction: PedPrediction | None,
                  obstacles: np.ndarray | None) -> np.ndarray:
         """The point the solve heads for: the goal; with a route (``config.route``) and walls, the route's subgoal
-        (planner/route.py); with the follow layer (``config.follow``), where an oncoming flow fills the robot's lane, a
-        point behind someone walking its way (planner/follow.py); with the foresight search (``config.foresight``), a
-        point on its way to that one."""
+        (planner/route.py); with the foresight search (``config.foresight``), a point on its way to that one."""
         subgoal = goal
         if self.router is not None and obstacles is not None and len(obstacles):
             subgoal = self.router.subgoal(state[:2], goal, obstacles)
-        if self.follow is not None:
-            subgoal = self.follow.subgoal(state[:2], subgoal, prediction)
         if self.foresight is not None:
             subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles, goal)
         return subgoal

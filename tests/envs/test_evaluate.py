@@ -277,7 +277,7 @@ def test_optional_mpc_fields_take_none_and_the_route_takes_none_or_default():
 def test_a_nested_config_field_is_set_by_its_dotted_name():
     from envs.cli import build_parser
     from envs.cli_options import policy_configs
-    from planner import FollowConfig, ForesightConfig
+    from planner import ForesightConfig
 
     def parse(*items: str):
         return policy_configs(build_parser().parse_args(
@@ -286,7 +286,6 @@ def test_a_nested_config_field_is_set_by_its_dotted_name():
     mpc = parse("foresight.horizon_s=6", "foresight.lead_s=1.2")
     assert mpc.foresight == ForesightConfig(horizon_s=6.0, lead_s=1.2)  # the second item kept the first
     assert parse("foresight=default").foresight == ForesightConfig() and parse().foresight is None
-    assert parse("follow.gap_m=1.5").follow == FollowConfig(gap_m=1.5) and parse().follow is None
     with pytest.raises(ValueError, match="horizon_s"):  # the nested config's own check
         parse("foresight.horizon_s=-1")
     with pytest.raises(ValueError, match="did you mean"):
