@@ -44,6 +44,21 @@ def test_tuning_suite_uses_the_reported_defaults_and_settings():
     assert {"bottleneck", "corridor", "plaza", "crossing", "circle_crossing"} <= {s[0] for s in settings(tune)}
 
 
+def test_tuning_suite_holds_every_dense_two_way_setting_of_the_reported_suite():
+    """Version 4: the dense corridor and crossing cells, robot visible and invisible (where the MPC policies fail
+    most), are all tuned on, at 20 seeds each."""
+    tune, reported = load_suite("crowdnav-tune"), load_suite("crowdnav-v1")
+    assert tune.version >= 4
+
+    def dense(suite):
+        return {(c.spec["scenario"], c.spec["n_pedestrians"], c.spec["robot_visible"]): len(c.seeds)
+                for c in suite.cells if not c.is_real and c.spec["scenario"] in ("corridor", "crossing")
+                and c.name.split("-")[-2] == "high"}
+    wanted = dense(reported)
+    assert len(wanted) == 4 and set(wanted) <= set(dense(tune))
+    assert all(dense(tune)[setting] == 20 for setting in wanted)
+
+
 def test_check_suite_is_the_reported_cells_at_other_seeds():
     """crowdnav-v1-check: the same recordings, scenarios, rules, predictors and episode counts as crowdnav-v1's cells
     (real ones since version 1, synthetic ones since version 5), and not one of its episodes."""
