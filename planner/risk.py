@@ -32,13 +32,8 @@ def resample_scalar(values: np.ndarray, step_s: float, dt_s: float, n_times: int
         if values.shape[1] else np.zeros((n_times, 0))
 
 
-def clearance_inflation(spread: np.ndarray, cfg: MPCConfig, sub_dt_s: float,
-                        speed: np.ndarray | None = None) -> np.ndarray:
-    """Clearance added (m) at the checked times (nt, N) from spread (nt, N) m (see the module doc); with
-    `growth_full_speed_mps` > 0 the time growth scales with each person's predicted speed (N,) m/s."""
+def clearance_inflation(spread: np.ndarray, cfg: MPCConfig, sub_dt_s: float) -> np.ndarray:
+    """Clearance added (m) at the checked times (nt, N) from spread (nt, N) m (see the module doc)."""
     t = sub_dt_s * np.arange(1, spread.shape[0] + 1)[:, None]
-    growth = cfg.clearance_growth_mps * t
-    if cfg.growth_full_speed_mps > 0 and speed is not None:
-        growth = growth * np.minimum(speed / cfg.growth_full_speed_mps, 1.0)[None]
-    extra = growth + cfg.spread_inflation * spread
+    extra = cfg.clearance_growth_mps * t + cfg.spread_inflation * spread
     return np.minimum(extra, cfg.max_clearance_inflation_m)

@@ -252,8 +252,7 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     ped_clear[:, : order.size] += radii[order]
     if order.size and (cfg.clearance_growth_mps > 0 or cfg.spread_inflation > 0):
         spread = resample_scalar(sample_spread(raw[:, :, order]), pred.step_s, cfg.dt_s / sub, sub * h)
-        speed = np.linalg.norm(raw[:, -1, order].mean(axis=0) - now[order], axis=-1) / (raw.shape[1] * pred.step_s)
-        ped_clear[:, : order.size] += clearance_inflation(spread, cfg, cfg.dt_s / sub, speed)
+        ped_clear[:, : order.size] += clearance_inflation(spread, cfg, cfg.dt_s / sub)
     ped_mask = np.zeros(m)
     ped_mask[: order.size] = 1.0
     grp = _group_arrays(stage_pos, radii, groups, robot_xy, cfg)

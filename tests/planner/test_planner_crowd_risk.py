@@ -74,18 +74,3 @@ def test_robot_steps_aside_for_a_pedestrian_from_behind():
     gap, side = _closed_loop(cfg, walkers)
     assert gap > R_SUM
     assert side > R_SUM  # stepped out of the walker's way rather than trying to outrun it
-
-
-def test_with_a_full_speed_the_time_growth_follows_each_persons_predicted_speed():
-    """growth_full_speed_mps 1.0: a walker at 1.2 m/s keeps the whole growth, someone standing none (their spread is
-    zero here), one at 0.5 m/s half of it; 0 (default): everyone alike."""
-    cfg = MPCConfig(clearance_growth_mps=0.1, max_clearance_inflation_m=2.0, growth_full_speed_mps=1.0)
-    base = R_SUM + cfg.safety_margin_m
-    scene = build_scene(np.zeros(2), _scene(0.0, [([3.0, 1.0], [-1.2, 0.0]), ([3.0, -1.0], [0.0, 0.0]),
-                                                  ([3.0, 0.0], [0.0, 0.5])]), None, cfg)
-    growth = 0.1 * 0.4 * np.arange(1, 11)
-    share = np.array([1.0, 0.0, 0.5])[scene.ped_index]  # the rows are ordered by distance
-    assert np.allclose(scene.ped_clear[:, :3] - base, growth[:, None] * share[None])
-    alike = build_scene(np.zeros(2), _scene(0.0, [([3.0, -1.0], [0.0, 0.0])]), None,
-                        replace(cfg, growth_full_speed_mps=0.0))
-    assert np.allclose(alike.ped_clear[:, 0] - base, growth)
