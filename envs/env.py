@@ -26,19 +26,20 @@ from gymnasium import spaces
 from crowdsim import CrowdState
 from envs.calibration import episode_calibration
 from envs.config import CrowdNavConfig
+from envs.crowds.crowd import clear_route
 from envs.crowds.models import make_crowd
 from envs.drawing.frame import SceneFrame
-from envs.history import TRACK_ROWS, PedHistory
+from envs.history import PedHistory
 from envs.observation import build_observation, observation_space
-from envs.perception import perceived, sensor_heading
 from envs.prediction import load_predictor_spec, oracle_prediction, predict
 from envs.rewards import StepFacts, reward_terms, weighted
 from envs.scoring.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.scoring.geometry import WallIndex
 from envs.scoring.kernels import intruded_groups, step_distances
 from envs.scoring.metrics import EpisodeMetrics, social_step
+from envs.senses import Senses, rows_of
 from envs.timing import DEFAULT_TIMING
-from envs.view import Decision, Pedestrians, PolicyView, action_command
+from envs.view import Decision, Pedestrians, PolicyView, action_command, control_action
 from planner import clip_control, model_dims, step_robot
 
 
@@ -75,8 +76,6 @@ class CrowdNavEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.observation_space = observation_space(self.config)
         self.timing = DEFAULT_TIMING
-        self.history = PedHistory(self.timing.obs_len)
-        self.track_history = PedHistory(TRACK_ROWS)  # the group rules' longer past (`track_window`)
         self._step_start: tuple[np.ndarray, CrowdState] | None = None
         self._nearest_row = -1
         self._spawns = SpawnContacts(self.config.discomfort_distance_m)
@@ -93,12 +92,9 @@ class CrowdNavEnv(gym.Env):
         self._pred_groups: np.ndarray | None = None
         self._calib = None  # the episode's `envs.calibration.PredictionCalibration` (with prediction_calibration)
         self._walls = WallIndex(self.crowd.walls)  # the walls never change: precomputed for the per-step check
+        self.senses = Senses(self.config, self._walls.segments, self.timing)  # perception and memory (envs.senses)
         self._peds_cache: tuple[CrowdState | None, Pedestrians | None] = (None, None)
         self._limited = self.config.observation.limited_view  # fov_deg < 360 or occlusion (`envs.perception`)
-        self._placed = False  # whether the robot is in the scene (the limited view starts then)
-        self._heading_rad = 0.0  # a holonomic robot's sensor heading while it stands (`sensor_heading`)
-        self._seen_cache: tuple[CrowdState | None, int, np.ndarray | None] = (None, -1, None)
-        self._remembered: set[int] = set()  # the ids the histories hold (limited view)
         self._pred_ids: np.ndarray | None = None  # the ids `_pred_samples` predicts (rows in its order)
         self._obs: dict[str, np.ndarray] = {}
 
@@ -109,9 +105,7 @@ class CrowdNavEnv(gym.Env):
         state = self.crowd.reset(int(self.np_random.integers(2**31 - 1)))
         self._pred_rng = np.random.default_rng(int(self.np_random.integers(2**31 - 1)))
         self.crowd.clear_robot()
-        self.history.clear()
-        self.track_history.clear()
-        self._placed = False
+        self.senses.clear()
         self.steps = self._sim_steps = 0
         self._state = state
         self._observe_arrivals()
@@ -129,10 +123,8 @@ class CrowdNavEnv(gym.Env):
         if cfg.robot.model == "unicycle":
             self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
         self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
-        self._placed, self._heading_rad = True, math.atan2(*(self.goal - start)[::-1])
-        self._seen_cache = (None, -1, None)
+        self.senses.place(math.atan2(*(self.goal - start)[::-1]), self._peds())
         if self._limited:  # the people hidden from the start are forgotten
-            self._remembered = {int(i) for i in self._peds().ped_id}
             self._observe_arrivals()
         self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels, start=tuple(start), goal=tuple(self.goal),
                                       goal_tolerance_m=cfg.goal_tolerance_m, dt_s=cfg.dt_s,
@@ -179,7 +171,7 @@ class CrowdNavEnv(gym.Env):
         dist_before = self._goal_distance()
         self.robot_state = step_robot(self.robot_state, control, cfg.dt_s, cfg.robot.model)
         if self._limited:
-            self._heading_rad = self.sensor_heading()
+            self.senses.heading_rad = self.sensor_heading()
         # 2. simulate (the robot body moves along the step's chord)
         self.crowd.set_robot(before_pos, (self.robot_state[:2] - before_pos) / cfg.dt_s, cfg.robot.radius_m)
         self._state = self.crowd.step()
@@ -283,8 +275,7 @@ class CrowdNavEnv(gym.Env):
         rows to give (default `pedestrians()`; with a limited view, `perceived_pedestrians()`: the history holds no
         one else). `rows`: the newest rows only, (rows, N, 2), the same floats."""
         p = self._remembered_people() if p is None else p
-        tick = self.config.ticks_per_prediction_step
-        return self.history.window_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, self.timing.step_s, rows)
+        return self.senses.window(p, self._sim_steps, rows)
 
     def track_window(self, p: Pedestrians | None = None, window: np.ndarray | None = None) -> np.ndarray:
         """(TRACK_ROWS = 48, N, 2) m: the same pedestrians' longer past for a group rule (`predictor.api`'s `track`),
@@ -293,8 +284,7 @@ class CrowdNavEnv(gym.Env):
         (`envs.history.PedHistory.track_now`). `p`: as `history_window`'s."""
         p = self._remembered_people() if p is None else p
         window = self.history_window(p) if window is None else window
-        tick = self.config.ticks_per_prediction_step
-        return self.track_history.track_now(p.ped_id, p.pos, (self._sim_steps % tick) / tick, window)
+        return self.senses.track(p, self._sim_steps, window)
 
     def perceived_pedestrians(self) -> Pedestrians:
         """The rows of `pedestrians()` the sensor perceives now (`ObservationConfig`'s sensor_gap_m, fov_deg and
@@ -304,7 +294,17 @@ class CrowdNavEnv(gym.Env):
     def sensor_heading(self) -> float:
         """The direction the sensor faces now, rad (`envs.perception.sensor_heading`): a unicycle's heading; a
         holonomic robot's direction of motion, or while it stands its last one (the goal's direction at the start)."""
-        return sensor_heading(self.robot_state, self.config.robot.model == "unicycle", self._heading_rad)
+        return self.senses.heading(self.robot_state)
+
+    @property
+    def history(self) -> PedHistory:
+        """The predictor's history of positions (`envs.history.PedHistory`, obs_len rows; `envs.senses`)."""
+        return self.senses.history
+
+    @property
+    def track_history(self) -> PedHistory:
+        """The group rules' longer history (`envs.history.PedHistory`, TRACK_ROWS rows; `envs.senses`)."""
+        return self.senses.track_history
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
         """The control (2,) (unicycle v m/s, omega rad/s; holonomic vx, vy m/s) an action asks for, clipped
@@ -319,14 +319,8 @@ class CrowdNavEnv(gym.Env):
         return clip_control(self.robot_state, action_command(a0, a1, r), self.config.dt_s, r)
 
     def control_to_action(self, control: np.ndarray) -> np.ndarray:
-        """The action (2,) float32 in [-1, 1] that asks for `control` (inverse of the scaling above)."""
-        u, r = np.asarray(control, float), self.config.robot
-        if r.model == "unicycle":
-            lo, hi = -r.min_speed_mps, r.max_speed_mps
-            a = np.array([2.0 * (u[0] - lo) / (hi - lo) - 1.0, u[1] / r.max_yaw_rate_radps])
-        else:
-            a = u / r.max_speed_mps
-        return np.clip(a, -1.0, 1.0).astype(np.float32)
+        """The action (2,) float32 in [-1, 1] that asks for `control` (`envs.view.control_action`)."""
+        return control_action(control, self.config.robot)
 
     def annotate(self, plan: np.ndarray | None = None, predictions: np.ndarray | None = None,
                  predicted_group_id: np.ndarray | None = None, options: np.ndarray | None = None) -> None:
@@ -353,22 +347,10 @@ class CrowdNavEnv(gym.Env):
 
     # ---------------------------------------------------------------------------------- internals
     def _observe_arrivals(self) -> None:
-        p = self._peds()
-        if self._limited and self._placed:  # only the perceived; whoever went out of sight is forgotten
-            p = self._rows(p, self._sensor_mask(p))
-            ids = {int(i) for i in p.ped_id}
-            gone = sorted(self._remembered - ids)
-            self.history.forget(gone)
-            self.track_history.forget(gone)
-            self._remembered = ids
-        self.history.observe(self._sim_steps * self.config.dt_s, p.ped_id, p.pos)
+        self.senses.observe(self._peds(), self.robot_state, self._state, self._sim_steps)
 
     def _record_tick(self) -> None:
-        p = self._peds()
-        if self._limited and self._placed:
-            p = self._rows(p, self._sensor_mask(p))
-        self.history.record(p.ped_id, p.pos)
-        self.track_history.record(p.ped_id, p.pos)
+        self.senses.record(self._peds(), self.robot_state, self._state, self._sim_steps)
 
     def _goal_distance(self) -> float:
         d = self.goal - self.robot_state[:2]
@@ -376,21 +358,10 @@ class CrowdNavEnv(gym.Env):
 
     def _choose_route(self) -> tuple[np.ndarray, np.ndarray]:
         """A route whose start keeps start_clearance_m (surface) from every pedestrian now and, with their
-        current velocities held, over start_lookahead_s; after 50 draws, the draw with the most clearance."""
+        current velocities held, over start_lookahead_s (`envs.crowds.crowd.clear_route`)."""
         p, cfg = self.pedestrians(), self.config
-        need = cfg.robot.radius_m + cfg.start_clearance_m
-        times = np.linspace(0.0, cfg.start_lookahead_s, 1 + math.ceil(cfg.start_lookahead_s / cfg.dt_s))
-        future = p.pos[None] + times[:, None, None] * p.vel[None]  # (T, n, 2)
-        best, best_gap = None, -np.inf
-        for _ in range(50):
-            start, goal = self.crowd.robot_route(self.np_random)
-            gap = float((np.linalg.norm(future - start, axis=-1) - p.radius).min()) if len(p.pos) else np.inf
-            if gap > best_gap:
-                best, best_gap = (start, goal), gap
-            if gap >= need:
-                break
-        start, goal = best
-        return np.asarray(start, float), np.asarray(goal, float)
+        return clear_route(self.crowd, p.pos, p.vel, p.radius, cfg.robot.radius_m + cfg.start_clearance_m,
+                           cfg.start_lookahead_s, cfg.dt_s, self.np_random)
 
     def _update_prediction(self) -> None:
         if not self.config.observation.needs_predictor:
@@ -414,53 +385,27 @@ class CrowdNavEnv(gym.Env):
 
     def _remembered_people(self) -> Pedestrians:
         """Whom the history holds now: `pedestrians()`, or with a limited view `perceived_pedestrians()`."""
-        return self.perceived_pedestrians() if self._limited and self._placed else self.pedestrians()
+        return self.perceived_pedestrians() if self.senses.sensing else self.pedestrians()
 
     def _sensed(self, p: Pedestrians) -> Pedestrians:
         """The rows of `p` (`pedestrians()` now) the sensor perceives (`_sensor_mask`)."""
-        return self._rows(p, self._sensor_mask(p))
-
-    @staticmethod
-    def _rows(p: Pedestrians, keep: np.ndarray | None) -> Pedestrians:
-        """The rows of `p` that `keep` (N,) bool selects; `p` itself when keep is None."""
-        return p if keep is None else Pedestrians(*(a[keep] for a in (p.pos, p.vel, p.radius, p.group_id, p.ped_id)))
+        return rows_of(p, self._sensor_mask(p))
 
     def _sensor_mask(self, p: Pedestrians) -> np.ndarray | None:
-        """(N,) bool: the rows of `p` (`pedestrians()` now, in its row order) the sensor perceives: within its
-        surface gap and, with a limited view, in its field of view and line of sight (`_seen`); None when every row
-        is (always so by default: the gap inf, 360 degrees, no occlusion)."""
-        gap = self.config.observation.sensor_gap_m
-        seen = self._seen(p) if self._limited and self._placed else None
-        if not math.isfinite(gap) or len(p.pos) == 0:
-            return seen
-        d = p.pos - self.robot_state[:2]
-        keep = np.sqrt((d * d).sum(-1)) - p.radius - self.config.robot.radius_m <= gap
-        if seen is not None:
-            keep &= seen
-        return None if keep.all() else keep
-
-    def _seen(self, p: Pedestrians) -> np.ndarray | None:
-        """(N,) bool: the rows of `p` (all pedestrians now) in the field of view and line of sight
-        (`envs.perception.perceived`), computed once per state; None when every row is."""
-        state, step, seen = self._seen_cache
-        if state is not self._state or step != self._sim_steps:
-            obs = self.config.observation
-            keep = perceived(self.robot_state[:2], self.sensor_heading(), p.pos, p.radius,
-                             self._walls.segments.reshape(-1, 4), obs.fov_deg, obs.occlusion)
-            seen = None if keep.all() else keep
-            self._seen_cache = (self._state, self._sim_steps, seen)
-        return seen
+        """(N,) bool: the rows of `p` (`pedestrians()` now) the sensor perceives (`envs.senses.Senses.mask`); None
+        when every row is."""
+        return self.senses.mask(p, self.robot_state, self._state, self._sim_steps)
 
     def _observe(self) -> dict[str, np.ndarray]:
         cfg, p = self.config, self._peds()
         if self._limited:
-            p = self._rows(p, self._sensor_mask(p))
+            p = rows_of(p, self._sensor_mask(p))
             groups, samples = self._predicted_rows(p)
         else:
             groups, samples = self._predicted_rows(p)
             keep = self._sensor_mask(p)
             if keep is not None:
-                p, groups = self._rows(p, keep), groups[keep]  # the mask once, for the rows and their groups
+                p, groups = rows_of(p, keep), groups[keep]  # the mask once, for the rows and their groups
                 samples = None if samples is None else samples[:, :, keep]
         time_left = max(0.0, 1.0 - self.steps / cfg.max_steps)
         calib = None if self._calib is None else self._calib.features(p.ped_id)

@@ -107,3 +107,14 @@ def action_command(a0: float, a1: float, robot: RobotConfig) -> np.ndarray:
         lo, hi = -robot.min_speed_mps, robot.max_speed_mps
         return np.array([lo + (a0 + 1.0) * 0.5 * (hi - lo), a1 * robot.max_yaw_rate_radps])
     return np.array([a0 * robot.max_speed_mps, a1 * robot.max_speed_mps])
+
+
+def control_action(control: np.ndarray, robot: RobotConfig) -> np.ndarray:
+    """The action (2,) float32 in [-1, 1] that asks for `control` (2,) (`action_command`'s inverse, clipped)."""
+    u = np.asarray(control, float)
+    if robot.model == "unicycle":
+        lo, hi = -robot.min_speed_mps, robot.max_speed_mps
+        a = np.array([2.0 * (u[0] - lo) / (hi - lo) - 1.0, u[1] / robot.max_yaw_rate_radps])
+    else:
+        a = u / robot.max_speed_mps
+    return np.clip(a, -1.0, 1.0).astype(np.float32)

@@ -7,6 +7,7 @@ robot visibility); `envs.crowds.replay.ReplayCrowd` replays an ETH/UCY-format fi
 from __future__ import annotations
 
 import copy
+import math
 from typing import Protocol
 
 import numpy as np
@@ -52,6 +53,25 @@ class Crowd(Protocol):
     def future(self, ped_ids: np.ndarray, times_s: np.ndarray) -> np.ndarray:
         """Privileged (the oracle's): where pedestrians `ped_ids` (N,) will be at `times_s` (T,) s from now, (T, N, 2)
         m, NaN where one is not in the scene then. The crowd itself is left exactly as it was."""
+
+
+def clear_route(crowd: Crowd, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray, need_m: float, lookahead_s: float,
+                dt_s: float, rng: np.random.Generator, draws: int = 50) -> tuple[np.ndarray, np.ndarray]:
+    """A robot route (start (2,), goal (2,) m) of `crowd` whose start keeps `need_m` (centre to each pedestrian's
+    surface) from the pedestrians at `pos` (n, 2) m with `radius` (n,) m now and, their velocities `vel` (n, 2) m/s
+    held, over `lookahead_s` (checked every dt_s); after `draws` draws, the draw with the most clearance."""
+    times = np.linspace(0.0, lookahead_s, 1 + math.ceil(lookahead_s / dt_s))
+    future = pos[None] + times[:, None, None] * vel[None]  # (T, n, 2)
+    best, best_gap = None, -np.inf
+    for _ in range(draws):
+        start, goal = crowd.robot_route(rng)
+        gap = float((np.linalg.norm(future - start, axis=-1) - radius).min()) if len(pos) else np.inf
+        if gap > best_gap:
+            best, best_gap = (start, goal), gap
+        if gap >= need_m:
+            break
+    start, goal = best
+    return np.asarray(start, float), np.asarray(goal, float)
 
 
 class SimCrowd:
