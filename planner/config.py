@@ -213,9 +213,6 @@ class MPCConfig:
     shield_max_risk: float = 0.1  # largest accepted fraction of hit samples, in [0, 1]
     shield_tau_s: float = 0.8  # time constant of the discount on later violations, s
     shield_cv: bool = True  # also avoid the last observed velocity held (needs prediction.history)
-    # a replacement command's cost falls by this much per metre it brings the robot nearer its subgoal over the
-    # look-ahead (m of discounted violation per m); 0 (default): ties go to the command nearest the plan's
-    shield_progress_weight: float = 0.0
     # -- global route (planner/route.py); None (default): head straight for the goal -------------------------
     route: RouteConfig | None = None
     # -- guidance layer (planner/guidance.py); None (default): one free solve, the MPC before 2026-11-28 ----------
@@ -239,7 +236,7 @@ class MPCConfig:
                                    "max_plan_reuse_steps"))
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))
         _check_positive(self, ("shield_dt_s", "shield_tau_s"))
-        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m", "shield_progress_weight"))
+        _check_non_negative(self, ("shield_horizon_s", "shield_margin_m"))
         if not 0.0 <= self.shield_max_risk <= 1.0:
             raise ValueError(f"MPCConfig.shield_max_risk must be in [0, 1], got {self.shield_max_risk!r}")
         if self.horizon_steps < 2:

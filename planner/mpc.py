@@ -164,8 +164,7 @@ class MPCPlanner:
         options = self._options if result.status == "solved" else []
         try:
             verdict = shield_control(state, result.controls, prediction, obstacles, self.config,
-                                     np.array([controls for _, controls, _ in options]) if options else None,
-                                     target=result.subgoal)
+                                     np.array([controls for _, controls, _ in options]) if options else None)
         except Exception:  # the plan's own control is still a valid (if unchecked) answer
             return result
         elapsed = time.perf_counter() - start

@@ -266,33 +266,25 @@ def touches_wall(robot_xy: np.ndarray | None, walls: np.ndarray | None, robot_ra
     return ((wall_clearance(robot_xy, walls) if wall_m is None else wall_m) < robot_radius).any(-1)
 
 
-def progress(state: np.ndarray, ends: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """(C,) m each roll-out's end (C, 2) is nearer `target` (2,) than the robot's position now (negative: farther)."""
-    target = np.asarray(target, float)
-    return float(np.hypot(*(np.asarray(state, float)[:2] - target))) - np.linalg.norm(ends - target, axis=-1)
-
-
 def shield_control(state: np.ndarray, planned: np.ndarray, prediction: PedPrediction,
                    walls: np.ndarray | None, cfg: MPCConfig,
-                   alternatives: np.ndarray | None = None, target: np.ndarray | None = None) -> ShieldVerdict:
+                   alternatives: np.ndarray | None = None) -> ShieldVerdict:
     """Check the plan's controls (H, 2) (each held ``cfg.dt_s``; the first is the one to apply) from ``state``
     (state_dim,) against every predicted sample and wall; replace its first control by a constant command
     when its risk exceeds ``cfg.shield_max_risk`` (see the module docstring). ``alternatives`` (A, H, 2):
     other plans from the same state (the guidance layer's other passing options), best first: when the plan fails
-    the check, the first of them that passes it gives the control, before any constant command is tried.
-    ``target`` (2,) m: the point the plan heads for (``cfg.shield_progress_weight``; None: no progress term)."""
+    the check, the first of them that passes it gives the control, before any constant command is tried."""
     futures, radii, has_cv = sample_futures(prediction, cfg.shield_dt_s, horizon_steps(cfg), cfg.shield_cv)
-    return shield_futures(state, planned, futures, radii, walls, cfg, certain_last=has_cv, alternatives=alternatives,
-                          target=target)
+    return shield_futures(state, planned, futures, radii, walls, cfg, certain_last=has_cv, alternatives=alternatives)
 
 
 def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, radii: np.ndarray,
                    walls: np.ndarray | None, cfg: MPCConfig, certain_last: bool = False,
-                   alternatives: np.ndarray | None = None, target: np.ndarray | None = None) -> ShieldVerdict:
+                   alternatives: np.ndarray | None = None) -> ShieldVerdict:
     """`shield_control` on the pedestrians' futures (K, T, n, 2) m at the shield's own times (+shield_dt_s ..
     +T shield_dt_s, T = `horizon_steps(cfg)`) with radii (n,) m; `certain_last`: the last future counts as certain
-    (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1. `alternatives` and
-    `target`: as in `shield_control`."""
+    (a hit is risk 1: the constant-velocity one). With that one future alone, the risk is 0 or 1. `alternatives`: as
+    in `shield_control`."""
     n_steps = horizon_steps(cfg)
     planned = np.asarray(planned, float)
     cands = candidate_controls(cfg.robot, planned[0])
@@ -338,7 +330,5 @@ def shield_futures(state: np.ndarray, planned: np.ndarray, futures: np.ndarray, 
                       else cfg.robot.max_speed_mps])
     cost = violation + DEVIATION_WEIGHT * (((cands - cands[0]) / scale) ** 2).sum(-1)
     cost = cost + WALL_CONTACT_COST * touches_wall(None, walls, cfg.robot.radius_m, wall_m)
-    if target is not None and cfg.shield_progress_weight > 0:
-        cost = cost - cfg.shield_progress_weight * progress(state, np.concatenate([xy0, xy])[:, -1], target)
     best = int(np.argmin(cost))
     return ShieldVerdict(cands[best].copy(), float(risk[0]), best != 0, float(risk[best]))

@@ -236,19 +236,3 @@ def test_the_grid_roll_out_is_the_stepwise_roll_out_bit_for_bit(robot):
         varying = held + rng.normal(0.0, 0.5, held.shape) * (i % 2)
         stepped = np.stack([np.stack([s[:2] for s in _stepped(state, c, robot)]) for c in varying])
         assert rollout_candidates(state, varying, 0.1, robot).tobytes() == stepped.tobytes()
-
-
-def test_progress_weight_breaks_ties_towards_the_subgoal():
-    """A walker straight ahead and coming at the robot: turning either way is equally safe. With a progress weight the
-    replacement turns towards the side the subgoal lies on; without one the target changes nothing."""
-    state = np.array([0.0, 0.0, 0.0, 1.2, 0.0])
-    pred = _crossing([4.0, 0.0], [-1.0, 0.0])
-    cfg = replace(SHIELD, shield_progress_weight=0.1)
-    left = shield_control(state, STRAIGHT, pred, None, cfg, target=np.array([6.0, 6.0]))
-    right = shield_control(state, STRAIGHT, pred, None, cfg, target=np.array([6.0, -6.0]))
-    assert left.replaced and right.replaced and left.chosen_risk == right.chosen_risk == 0.0
-    assert left.control[1] > 0.0 > right.control[1]  # yaw rate towards the subgoal's side
-    off = [shield_control(state, STRAIGHT, pred, None, SHIELD, target=np.array([6.0, y])).control for y in (6.0, -6.0)]
-    assert np.array_equal(off[0], off[1])
-    with pytest.raises(ValueError):
-        MPCConfig(shield_progress_weight=-0.1)
