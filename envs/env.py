@@ -31,13 +31,13 @@ from envs.crowds.models import make_crowd
 from envs.drawing.frame import SceneFrame
 from envs.history import PedHistory
 from envs.observation import build_observation, observation_space
+from envs.perception import Senses, rows_of
 from envs.prediction import load_predictor_spec, oracle_prediction, predict
 from envs.rewards import StepFacts, reward_terms, weighted
 from envs.scoring.collisions import SPAWN_WINDOW_S, SpawnContacts, collision_kind
 from envs.scoring.geometry import WallIndex
 from envs.scoring.kernels import intruded_groups, step_distances
 from envs.scoring.metrics import EpisodeMetrics, social_step
-from envs.senses import Senses, rows_of
 from envs.timing import DEFAULT_TIMING
 from envs.view import Decision, Pedestrians, PolicyView, action_command, control_action
 from planner import clip_control, model_dims, step_robot
@@ -92,7 +92,7 @@ class CrowdNavEnv(gym.Env):
         self._pred_groups: np.ndarray | None = None
         self._calib = None  # the episode's `envs.calibration.PredictionCalibration` (with prediction_calibration)
         self._walls = WallIndex(self.crowd.walls)  # the walls never change: precomputed for the per-step check
-        self.senses = Senses(self.config, self._walls.segments, self.timing)  # perception and memory (envs.senses)
+        self.senses = Senses(self.config, self._walls.segments, self.timing)  # perception and memory (envs.perception)
         self._peds_cache: tuple[CrowdState | None, Pedestrians | None] = (None, None)
         self._limited = self.config.observation.limited_view  # fov_deg < 360 or occlusion (`envs.perception`)
         self._pred_ids: np.ndarray | None = None  # the ids `_pred_samples` predicts (rows in its order)
@@ -298,12 +298,12 @@ class CrowdNavEnv(gym.Env):
 
     @property
     def history(self) -> PedHistory:
-        """The predictor's history of positions (`envs.history.PedHistory`, obs_len rows; `envs.senses`)."""
+        """The predictor's history of positions (`envs.history.PedHistory`, obs_len rows; `envs.perception`)."""
         return self.senses.history
 
     @property
     def track_history(self) -> PedHistory:
-        """The group rules' longer history (`envs.history.PedHistory`, TRACK_ROWS rows; `envs.senses`)."""
+        """The group rules' longer history (`envs.history.PedHistory`, TRACK_ROWS rows; `envs.perception`)."""
         return self.senses.track_history
 
     def action_to_control(self, action: np.ndarray) -> np.ndarray:
@@ -392,7 +392,7 @@ class CrowdNavEnv(gym.Env):
         return rows_of(p, self._sensor_mask(p))
 
     def _sensor_mask(self, p: Pedestrians) -> np.ndarray | None:
-        """(N,) bool: the rows of `p` (`pedestrians()` now) the sensor perceives (`envs.senses.Senses.mask`); None
+        """(N,) bool: the rows of `p` (`pedestrians()` now) the sensor perceives (`envs.perception.Senses.mask`); None
         when every row is."""
         return self.senses.mask(p, self.robot_state, self._state, self._sim_steps)
 

@@ -210,7 +210,7 @@ def test_predicted_observations_cover_the_perceived_people_only():
 def test_by_default_nobody_is_hidden_and_the_perception_code_never_runs(monkeypatch):
     """Defaults (360 degrees, no occlusion): the mask is None as before, so the observations are the old ones (also
     checked once by hashing observations and views over episodes before and after the change)."""
-    monkeypatch.setattr("envs.senses.perceived", lambda *a, **k: pytest.fail("perception ran under the defaults"))
+    monkeypatch.setattr("envs.perception.perceived", lambda *a, **k: pytest.fail("perception ran under the defaults"))
     env = CrowdNavEnv(CrowdNavConfig(scenario="corridor"))
     assert not env.config.observation.limited_view
     env.reset(seed=0)
