@@ -94,7 +94,6 @@ class CrowdNavEnv(gym.Env):
         self._walls = WallIndex(self.crowd.walls)  # the walls never change: precomputed for the per-step check
         self.senses = Senses(self.config, self._walls.segments, self.timing)  # perception and memory (envs.perception)
         self._peds_cache: tuple[CrowdState | None, Pedestrians | None] = (None, None)
-        self._limited = self.config.observation.limited_view  # fov_deg < 360 or occlusion (`envs.perception`)
         self._pred_ids: np.ndarray | None = None  # the ids `_pred_samples` predicts (rows in its order)
         self._obs: dict[str, np.ndarray] = {}
 
@@ -124,7 +123,7 @@ class CrowdNavEnv(gym.Env):
             self.robot_state[2] = np.arctan2(*(self.goal - start)[::-1])
         self.crowd.set_robot(start, np.zeros(2), cfg.robot.radius_m)
         self.senses.place(math.atan2(*(self.goal - start)[::-1]), self._peds())
-        if self._limited:  # the people hidden from the start are forgotten
+        if self.senses.limited:  # the people hidden from the start are forgotten
             self._observe_arrivals()
         self.metrics = EpisodeMetrics(labelled=self.crowd.group_labels, start=tuple(start), goal=tuple(self.goal),
                                       goal_tolerance_m=cfg.goal_tolerance_m, dt_s=cfg.dt_s,
@@ -170,7 +169,7 @@ class CrowdNavEnv(gym.Env):
         self._step_start = (before_pos, before)
         dist_before = self._goal_distance()
         self.robot_state = step_robot(self.robot_state, control, cfg.dt_s, cfg.robot.model)
-        if self._limited:
+        if self.senses.limited:
             self.senses.heading_rad = self.sensor_heading()
         # 2. simulate (the robot body moves along the step's chord)
         self.crowd.set_robot(before_pos, (self.robot_state[:2] - before_pos) / cfg.dt_s, cfg.robot.radius_m)
@@ -398,8 +397,8 @@ class CrowdNavEnv(gym.Env):
 
     def _observe(self) -> dict[str, np.ndarray]:
         cfg, p = self.config, self._peds()
-        if self._limited:
-            p = rows_of(p, self._sensor_mask(p))
+        if self.senses.limited:
+            p = self._sensed(p)
             groups, samples = self._predicted_rows(p)
         else:
             groups, samples = self._predicted_rows(p)
