@@ -111,6 +111,7 @@ def perceived(origin: np.ndarray, heading_rad: float, pos: np.ndarray, radius: n
         keep &= unoccluded(origin, pos, radius, walls)
     return keep
 
+
 def rows_of(p: Pedestrians, keep: np.ndarray | None) -> Pedestrians:
     """The rows of `p` that `keep` (N,) bool selects; `p` itself when keep is None."""
     return p if keep is None else Pedestrians(*(a[keep] for a in (p.pos, p.vel, p.radius, p.group_id, p.ped_id)))
