@@ -4,7 +4,10 @@ ignores the robot (the real cells and the invisible-robot cells), resumable, and
 One JSON line per episode in `<out>/bounds.jsonl`: {"cell", "seed", "verdict", "earliest_arrival_s",
 "witness_arrival_s", "robot_witness", "fingerprint", "reach" (the grid, `ReachConfig`), "wall_time_s"}.
 robot_witness (feasible episodes only, else null): "success" when the benchmark's own robot, tracking a roomier
-witness path in the env (`envs.evaluation.witness`, ROBOT_ATTEMPTS), wins the episode, "failed" otherwise.
+witness path in the env (`envs.evaluation.witness`, ROBOT_ATTEMPTS), wins the episode, "failed" otherwise;
+"robot_attempt": which of ROBOT_ATTEMPTS won (1-based; null: none). "sensing_witness" / "sensing_attempt" (every
+episode not proven infeasible, else null): the same for the witness that knows only the people it has sensed
+(`envs.evaluation.sensing`), a floor for a robot that senses and predicts perfectly.
 
 A rerun with the same `--out` skips the episodes already there (a killed run resumes); a line made under other
 settings (suite version, cell, grid) raises. The benchmark's leaderboard reads this file when it lies in the same
@@ -16,7 +19,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import closing
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -25,12 +28,13 @@ from typing import Any
 from envs.atomic import append_line, check_writable_dir, write_text_atomic
 from envs.config import CrowdNavConfig
 from envs.evaluation.episode import fingerprint
-from envs.evaluation.reachability import VERDICTS, ReachConfig, course_of, crowd_is_fixed, reach, roomy_path
+from envs.evaluation.reachability import VERDICTS, Course, ReachConfig, course_of, crowd_is_fixed, reach, roomy_path
+from envs.evaluation.sensing import sensing_path
 from envs.evaluation.suite import DEFAULT_DATA, Cell, Suite
 from envs.evaluation.witness import track
 
 BOUNDS = "bounds.jsonl"
-METHOD_VERSION = 2  # bump when the bound's computation changes (old lines then no longer match)
+METHOD_VERSION = 3  # bump when the bound's computation changes (old lines then no longer match)
 # (speed fraction, extra clearance m) of the roomy witness paths the benchmark's robot tracks, tried in order
 ROBOT_ATTEMPTS = ((0.85, 0.1), (0.7, 0.2), (1.0, 0.1))
 _FIELDS = {"cell": str, "seed": int, "verdict": str, "fingerprint": str, "reach": dict}
@@ -52,17 +56,29 @@ def run_bound_task(task: BoundTask) -> dict[str, Any]:
     start = time.perf_counter()
     course = course_of(task.config, task.seed)
     r = reach(course, task.reach)
-    robot = None
+    robot = sensing = (None, None)
     if r.verdict == "feasible":  # can the benchmark's own robot win it too? (envs.evaluation.witness)
-        robot = "failed"
-        for fraction, extra in ROBOT_ATTEMPTS:
-            path = roomy_path(course, task.reach, fraction, extra)
-            if path is not None and track(task.config, task.seed, path) == "success":
-                robot = "success"
-                break
+        robot = _attempts(task, lambda fraction, extra: roomy_path(course, task.reach, fraction, extra))
+    if r.verdict != "infeasible":  # and knowing only whom it has sensed? (envs.evaluation.sensing)
+        sensing = _attempts(task, lambda fraction, extra: _sensing(course, task, fraction, extra))
     return {"cell": task.cell, "seed": task.seed, "verdict": r.verdict, "earliest_arrival_s": r.earliest_arrival_s,
-            "witness_arrival_s": r.witness_arrival_s, "robot_witness": robot, "fingerprint": task.fingerprint,
+            "witness_arrival_s": r.witness_arrival_s, "robot_witness": robot[0], "robot_attempt": robot[1],
+            "sensing_witness": sensing[0], "sensing_attempt": sensing[1], "fingerprint": task.fingerprint,
             "reach": asdict(task.reach), "wall_time_s": round(time.perf_counter() - start, 3)}
+
+
+def _attempts(task: BoundTask, path_of: Callable[[float, float], Any]) -> tuple[str, int | None]:
+    """("success", the 1-based attempt) for the first of ROBOT_ATTEMPTS whose path the benchmark's robot wins by
+    tracking it in the env, else ("failed", None)."""
+    for i, (fraction, extra) in enumerate(ROBOT_ATTEMPTS, start=1):
+        path = path_of(fraction, extra)
+        if path is not None and track(task.config, task.seed, path) == "success":
+            return "success", i
+    return "failed", None
+
+
+def _sensing(course: Course, task: BoundTask, fraction: float, extra: float) -> Any:
+    return sensing_path(course, task.reach, task.config.observation.sensor_range_m, fraction, extra)[0]
 
 
 def bound_fingerprint(suite: Suite, cell: Cell, config: ReachConfig) -> str:
@@ -176,15 +192,19 @@ def run_bounds(suite: Suite, cells: Sequence[Cell], out: str | Path, *, config: 
 def bounds_summary(suite: Suite, cells: Sequence[Cell], lines: dict[tuple[str, int], dict[str, Any]]) -> dict[str, Any]:
     """Per cell and pool (real, synthetic): episodes, verdict counts, the success ceiling (share of episodes not
     proven infeasible: no policy can do better), the floor of what a holonomic robot could do (share proven
-    feasible) and of what the benchmark's robot could do (share it won tracking a witness), and the mean earliest
-    arrival over the feasible-or-open episodes."""
+    feasible), of what the benchmark's robot could do knowing the future (share it won tracking a witness) and knowing
+    only the people it has sensed (`envs.evaluation.sensing`), and the mean earliest arrival over the
+    feasible-or-open episodes."""
     def count(rows: list[dict[str, Any]]) -> dict[str, Any]:
         n = len(rows)
         c = {v: sum(r["verdict"] == v for r in rows) for v in VERDICTS}
         arrivals = [r["earliest_arrival_s"] for r in rows if r["earliest_arrival_s"] is not None]
         won = sum(r.get("robot_witness") == "success" for r in rows)
-        return {"episodes": n, **c, "robot_wins": won, "success_ceiling": (n - c["infeasible"]) / n if n else None,
+        sensed = sum(r.get("sensing_witness") == "success" for r in rows)
+        return {"episodes": n, **c, "robot_wins": won, "sensing_wins": sensed,
+                "success_ceiling": (n - c["infeasible"]) / n if n else None,
                 "holonomic_floor": c["feasible"] / n if n else None, "robot_floor": won / n if n else None,
+                "sensing_floor": sensed / n if n else None,
                 "mean_earliest_arrival_s": sum(arrivals) / len(arrivals) if arrivals else None}
 
     per_cell = {c.name: count([lines[(c.name, s)] for s in c.seeds if (c.name, s) in lines]) for c in cells}
@@ -204,15 +224,20 @@ def bounds_table(summary: dict[str, Any]) -> list[str]:
              "scene (envs.evaluation.reachability): infeasible = no robot at the robot's top speed could reach the "
              "goal in time without contact; feasible = a holonomic robot at that speed has a contact-free path; open "
              "= neither bound decides; robot wins = feasible episodes the benchmark's own robot won, knowing the "
-             "future, by tracking a witness path in the env. Success ceiling = share not infeasible (no policy can "
-             "do better); robot floor = share the robot won (a policy with foresight can do at least that).", "",
-             "| cell or pool | episodes | infeasible | open | feasible | robot wins | success ceiling | robot floor | "
-             "earliest arrival (s, mean) |", "|---|---|---|---|---|---|---|---|---|"]
+             "future, by tracking a witness path in the env; sensing robot wins = episodes it won knowing the future "
+             "only of the people it has sensed (within its sensor range so far; envs.evaluation.sensing). Success "
+             "ceiling = share not infeasible (no policy can do better); robot floor = share the robot won (a policy "
+             "with foresight can do at least that); sensing floor = share the sensing robot won (a policy that "
+             "predicts the people it senses perfectly can do at least that).", "",
+             "| cell or pool | episodes | infeasible | open | feasible | robot wins | sensing robot wins | success "
+             "ceiling | robot floor | sensing floor | earliest arrival (s, mean) |", "|---|---|---|---|---|---|---|---|"
+             "---|---|---|"]
     rows = [*summary["cells"].items(), *((f"**pooled {k}**", v) for k, v in summary["pooled"].items())]
     for where, c in rows:
         arr = "–" if c["mean_earliest_arrival_s"] is None else f"{c['mean_earliest_arrival_s']:.1f}"
         lines.append(f"| {where} | {c['episodes']} | {c['infeasible']} | {c['open']} | {c['feasible']} | "
-                     f"{c['robot_wins']} | {c['success_ceiling']:.2f} | {c['robot_floor']:.2f} | {arr} |")
+                     f"{c['robot_wins']} | {c['sensing_wins']} | {c['success_ceiling']:.2f} | {c['robot_floor']:.2f} | "
+                     f"{c['sensing_floor']:.2f} | {arr} |")
     if summary.get("skipped"):
         lines += ["", f"Not bounded (people there see the robot, so its course depends on the robot): "
                       f"{', '.join(summary['skipped'])}."]

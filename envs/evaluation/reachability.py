@@ -165,7 +165,7 @@ def course_of(config: CrowdNavConfig, seed: int) -> Course:
                   pos, rad, pid, fresh)
 
 
-class _Grid:
+class Grid:
     """Square cells of side h with one centre exactly at `origin_cell`'s point; centres x0 + i h, y0 + j h."""
 
     def __init__(self, course: Course, h: float, margin_m: float) -> None:
@@ -203,7 +203,7 @@ class _Grid:
         return out
 
 
-def _optimistic(course: Course, grid: _Grid, every: int) -> float | None:
+def _optimistic(course: Course, grid: Grid, every: int) -> float | None:
     """First time (s) the optimistic set can be at the goal, or None before the time limit (module docstring)."""
     h, half_diag, step_m = grid.h, grid.h / math.sqrt(2.0), course.max_speed_mps * course.dt_s
     free_wall = grid.wall_dist >= course.robot_radius_m - half_diag
@@ -224,7 +224,7 @@ def _optimistic(course: Course, grid: _Grid, every: int) -> float | None:
     return None
 
 
-def _blocked_opt(course: Course, grid: _Grid, k: int) -> np.ndarray:
+def _blocked_opt(course: Course, grid: Grid, k: int) -> np.ndarray:
     """Cells no point of which is clear of a pedestrian at env step k (fresh ones left out): centres within the
     contact distance less half a cell diagonal."""
     keep = ~course.ped_fresh[k]
@@ -259,36 +259,56 @@ def stride_of(dt_s: float) -> int:
     return max(1, int(round(MIN_STEP_S / dt_s)))
 
 
-def _conservative(course: Course, grid: _Grid, keep: bool, speed_mps: float | None = None,
+def _conservative(course: Course, grid: Grid, keep: bool, speed_mps: float | None = None,
                   extra_m: float = 0.0) -> tuple[float | None, np.ndarray | None]:
     """First time (s) the conservative set is at the goal (None: not before the time limit) and, if `keep`, a
     witness path (k + 1, 2) m, one point per env step from the start (grid centres every `stride_of(dt)` steps,
     straight lines between; module docstring). speed_mps: the witness's top speed (default the robot's); extra_m:
     clearance kept beyond the contact test, m."""
+    stride = stride_of(course.dt_s)
+    arrival, cells = conservative_run(course, grid, grid.start, 0, speed_mps, extra_m, keep=keep)
+    if arrival is None:
+        return None, None
+    return arrival * course.dt_s, (fill_strides(np.array([grid.xy[c] for c in cells]), stride) if keep else None)
+
+
+def conservative_run(course: Course, grid: Grid, start: tuple[int, int], first_step: int,
+                     speed_mps: float | None = None, extra_m: float = 0.0, known: np.ndarray | None = None,
+                     keep: bool = True, partial: bool = False) -> tuple[int | None, list[tuple[int, int]]]:
+    """The conservative set stepped from grid cell `start` at env step `first_step` (a whole multiple of the
+    stride) to the time limit, against the pedestrians whose ids are in `known` (None: everybody). Returns the env
+    step of the first arrival at the goal (None: none) and, if `keep`, the witness's cells, one per stride from the
+    start: traced back from the goal, or with `partial` and no arrival, from the cell of the last non-empty set
+    nearest the goal (else []). speed_mps, extra_m: as in `_conservative`."""
     speed = course.max_speed_mps if speed_mps is None else speed_mps
     stride = stride_of(course.dt_s)
     h, margin, step_m = grid.h, _swept_margin(course, stride) + extra_m, speed * course.dt_s * stride
+    pad = int(math.ceil(step_m / h)) + 1
     free_wall = grid.wall_dist >= course.robot_radius_m + extra_m + 1e-6
     at_goal = grid.goal_dist < course.goal_tolerance_m
     reach = np.zeros(grid.shape, bool)
-    reach[grid.start] = True
+    reach[start] = True
     history = [reach]
-    for k in range(stride, course.n_steps + 1, stride):
-        clear = course.ped_radius[k] + course.robot_radius_m + margin
-        reach = _dilate(reach, step_m, h) & free_wall & ~grid.blocked(course.ped_pos[k], clear)
+    for k in range(first_step + stride, course.n_steps + 1, stride):
+        pos, radius = course.ped_pos[k], course.ped_radius[k]
+        if known is not None:
+            mine = np.isin(course.ped_id[k], known)
+            pos, radius = pos[mine], radius[mine]
+        nxt = _dilate(reach, step_m, h) & free_wall & ~grid.blocked(pos, radius + course.robot_radius_m + margin)
+        if not nxt.any():
+            break
+        reach = nxt
         if keep:
             history.append(reach)
         if np.any(reach & at_goal):
-            if not keep:
-                return k * course.dt_s, None
-            cells = trace_back(history, tuple(np.argwhere(reach & at_goal)[0]), int(math.ceil(step_m / h)) + 1)
-            return k * course.dt_s, _fill(np.array([grid.xy[c] for c in cells]), stride)
-        if not reach.any():
-            break
-    return None, None
+            return k, (trace_back(history, tuple(np.argwhere(reach & at_goal)[0]), pad) if keep else [])
+    if not (keep and partial):
+        return None, []
+    dist = np.where(reach, grid.goal_dist, np.inf)
+    return None, trace_back(history, np.unravel_index(int(np.argmin(dist)), dist.shape), pad)
 
 
-def _fill(corners: np.ndarray, stride: int) -> np.ndarray:
+def fill_strides(corners: np.ndarray, stride: int) -> np.ndarray:
     """(n + 1, 2) points a stride apart -> (n * stride + 1, 2), straight lines between."""
     if stride == 1:
         return corners
@@ -302,7 +322,7 @@ def reach(course: Course, config: ReachConfig | None = None, witness_path: bool 
     set's path (one grid centre per env step) when it found one."""
     cfg = config or ReachConfig()
     every = cfg.steps_per_check(course.dt_s)
-    grid = _grid_for(course, cfg, every)
+    grid = grid_for(course, cfg, every)
     earliest = _optimistic(course, grid, every)
     witness, path = _conservative(course, grid, witness_path) if earliest is not None else (None, None)
     verdict = "infeasible" if earliest is None else "feasible" if witness is not None else "open"
@@ -315,11 +335,11 @@ def roomy_path(course: Course, config: ReachConfig | None = None, speed_fraction
     top speed) that keeps extra_m more clearance from people and walls: room for a robot with acceleration and
     turn-rate limits to track it (`envs.evaluation.witness`). None where there is none before the time limit."""
     cfg = config or ReachConfig()
-    grid = _grid_for(course, cfg, cfg.steps_per_check(course.dt_s))
+    grid = grid_for(course, cfg, cfg.steps_per_check(course.dt_s))
     return _conservative(course, grid, True, speed_fraction * course.max_speed_mps, extra_m)[1]
 
 
-def _grid_for(course: Course, cfg: ReachConfig, every: int) -> _Grid:
+def grid_for(course: Course, cfg: ReachConfig, every: int) -> Grid:
     """The grid of a course: cell side = the robot's longest conservative step / cells_per_step."""
     h = course.max_speed_mps * course.dt_s * stride_of(course.dt_s) / cfg.cells_per_step
-    return _Grid(course, h, margin_m=course.robot_radius_m + 4 * h + course.max_speed_mps * course.dt_s * every)
+    return Grid(course, h, margin_m=course.robot_radius_m + 4 * h + course.max_speed_mps * course.dt_s * every)

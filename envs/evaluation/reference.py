@@ -60,10 +60,11 @@ def bound_classes(records: Sequence[EpisodeRecord], bounds: dict[tuple[str, int]
     """A policy's failures by the episode's any-robot verdict (`envs.evaluation.bounds`): on episodes no robot
     could succeed in ("infeasible"), undecided ("open"), or where a holonomic robot had a contact-free path
     ("feasible"); `robot_wins`: of the feasible ones, those the benchmark's robot won tracking a witness path;
+    `sensing_wins`: failures on episodes it won knowing only the people it had sensed (`envs.evaluation.sensing`);
     `unbounded`: failures on episodes without a bound (people there see the robot).
     `successes_on_infeasible` must be 0: a success there would contradict the bound."""
-    out = {"failures": 0, "infeasible": 0, "open": 0, "feasible": 0, "robot_wins": 0, "unbounded": 0,
-           "successes_on_infeasible": 0}
+    out = {"failures": 0, "infeasible": 0, "open": 0, "feasible": 0, "robot_wins": 0, "sensing_wins": 0,
+           "unbounded": 0, "successes_on_infeasible": 0}
     for r in records:
         b = bounds.get((r.cell, r.seed))
         if r.outcome == "success" and b is not None and b["verdict"] == "infeasible":
@@ -72,6 +73,7 @@ def bound_classes(records: Sequence[EpisodeRecord], bounds: dict[tuple[str, int]
             out["failures"] += 1
             out["unbounded" if b is None else b["verdict"]] += 1
             out["robot_wins"] += b is not None and b.get("robot_witness") == "success"
+            out["sensing_wins"] += b is not None and b.get("sensing_witness") == "success"
     return out
 
 
@@ -83,13 +85,15 @@ def bound_failure_table(board: dict[str, Any]) -> list[str]:
     lines = ["### Failures against what any robot could do", "",
              "A policy's failures (collision or time-out) on episodes no robot could succeed in / undecided / "
              "where a holonomic robot had a contact-free path (of which the benchmark's robot, knowing the future, "
-             "won by tracking one) / not bounded (people see the robot).", "",
-             "| pool | policy | failures | infeasible | open | feasible (robot won) | not bounded |",
-             "|---|---|---|---|---|---|---|"]
+             "won by tracking one) / not bounded (people see the robot); sensing robot won: failures on episodes the "
+             "robot won knowing the future only of the people it had sensed.", "",
+             "| pool | policy | failures | infeasible | open | feasible (robot won) | sensing robot won | "
+             "not bounded |",
+             "|---|---|---|---|---|---|---|---|"]
     for pool, by_policy in b["failures"].items():
         for name, c in by_policy.items():
             flag = f" ({c['successes_on_infeasible']} successes on infeasible episodes!)" \
                 if c["successes_on_infeasible"] else ""
             lines.append(f"| {pool} | {name} | {c['failures']} | {c['infeasible']} | {c['open']} | {c['feasible']} "
-                         f"({c['robot_wins']}) | {c['unbounded']}{flag} |")
+                         f"({c['robot_wins']}) | {c['sensing_wins']} | {c['unbounded']}{flag} |")
     return [*lines, ""]
