@@ -25,7 +25,8 @@ def test_bounds_resume_skip_seen_robots_and_class_failures_in_the_leaderboard(tm
     # 2 s cannot cover the 12 m across the circle at 1.2 m/s: no robot could succeed
     assert first["skipped"] == ["corridor-seen"]
     assert first["cells"]["circle-short"]["infeasible"] == 2 and first["cells"]["circle-short"]["success_ceiling"] == 0
-    assert all(line["robot_witness"] is None for line in read_bounds(tmp_path / BOUNDS).values())  # infeasible
+    lines = read_bounds(tmp_path / BOUNDS).values()
+    assert all(line["robot_witness"] is None and line["sensing_witness"] is None for line in lines)  # infeasible
     again = run_bounds(suite, suite.cells, tmp_path, progress=False)
     assert again["run"]["episodes_run"] == 0 and again["run"]["episodes_resumed"] == 2
     board = run_benchmark(suite, suite.cells, [PolicyConfig("random")], tmp_path, progress=False)
@@ -85,6 +86,10 @@ def test_a_feasible_episode_is_tried_with_the_benchmark_robot(tmp_path):
     assert {line["verdict"] for line in lines.values()} == {"feasible"}  # 3 people in a 12 m circle, 20 s
     assert {line["robot_witness"] for line in lines.values()} == {"success"}
     assert summary["cells"]["circle-short"]["robot_floor"] == 1.0
+    # three people in view from the start: the sensing witness knows them all and wins too, at its first attempt
+    assert {(line["sensing_witness"], line["sensing_attempt"]) for line in lines.values()} == {("success", 1)}
+    assert summary["cells"]["circle-short"]["sensing_floor"] == 1.0
+    assert "sensing robot wins" in (tmp_path / "bounds.md").read_text()
 
 
 def test_an_episode_whose_worker_died_is_left_for_the_rerun(tmp_path, monkeypatch):
