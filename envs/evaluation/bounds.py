@@ -25,6 +25,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from envs.atomic import append_line, check_writable_dir, write_text_atomic
 from envs.config import CrowdNavConfig
 from envs.evaluation.episode import fingerprint
@@ -67,7 +69,7 @@ def run_bound_task(task: BoundTask) -> dict[str, Any]:
             "reach": asdict(task.reach), "wall_time_s": round(time.perf_counter() - start, 3)}
 
 
-def _attempts(task: BoundTask, path_of: Callable[[float, float], Any]) -> tuple[str, int | None]:
+def _attempts(task: BoundTask, path_of: Callable[[float, float], np.ndarray | None]) -> tuple[str, int | None]:
     """("success", the 1-based attempt) for the first of ROBOT_ATTEMPTS whose path the benchmark's robot wins by
     tracking it in the env, else ("failed", None)."""
     for i, (fraction, extra) in enumerate(ROBOT_ATTEMPTS, start=1):
@@ -77,7 +79,8 @@ def _attempts(task: BoundTask, path_of: Callable[[float, float], Any]) -> tuple[
     return "failed", None
 
 
-def _sensing(course: Course, task: BoundTask, fraction: float, extra: float) -> Any:
+def _sensing(course: Course, task: BoundTask, fraction: float, extra: float) -> np.ndarray:
+    """The sensing witness's path for one of ROBOT_ATTEMPTS (its plan count dropped)."""
     return sensing_path(course, task.reach, task.config.observation.sensor_range_m, fraction, extra)[0]
 
 
