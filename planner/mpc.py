@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, replace
 from functools import lru_cache
@@ -190,23 +189,6 @@ class MPCPlanner:
         elapsed, iters = sum(t.elapsed for t in tries), sum(t.iters for t in tries)
         solved = sorted((t for t in tries if t.status == "solved"), key=self._rank)  # stable: the free solve first
         best = solved[0] if solved else tries[0]
-        relief = os.environ.get("CN_RELIEF")
-        if relief and best.status == "solved" and best.max_slack > 0.05:
-            for margin in map(float, relief.split(",")):
-                kw = {"safety_margin_m": margin}
-                if os.environ.get("CN_RELIEF_NOGROW"):
-                    kw.update(clearance_growth_mps=0.0, spread_inflation=0.0)
-                scene2 = build_scene(state, prediction, obstacles, replace(cfg, **kw))
-                p2 = pack_params(ocp.sizes, state, goal, scene2)
-                w0 = best.w.copy()
-                w0[ocp.layout.s.ravel()] = ocp.slack_fn(w0, p2).full().ravel()
-                t2 = self._solve_from(w0, p2)
-                elapsed, iters = elapsed + t2.elapsed, iters + t2.iters
-                if os.environ.get("CN_DEBUG"):
-                    print("relief", margin, best.max_slack, t2.status, t2.max_slack, flush=True)
-                if t2.status == "solved" and t2.max_slack <= 0.05:
-                    best = t2
-                    break
         self._options = []
         if best.status != "solved":
             return self._fallback(state, best.status, best.solver_status, elapsed, iters, best.max_slack)

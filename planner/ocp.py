@@ -269,11 +269,7 @@ def _collision_terms(b: _Builder, k: int) -> None:
                  for pos, _ in points for i in range(sz.w)]
         _soft(b, k, exprs, s[sz.ns - 1], need)
     b.slack_min.append(ca.fmax(ca.vertcat(*need), 0))
-    import math
-    import os
-    tau, floor = float(os.environ.get("CN_SLACK_TAU", "inf")), float(os.environ.get("CN_SLACK_FLOOR", "0.1"))
-    f = 1.0 if not math.isfinite(tau) else floor + (1 - floor) * math.exp(-k * cfg.dt_s / tau)
-    b.cost += f * (cfg.weights.slack_l1 * ca.sum1(s) + cfg.weights.slack_l2 * ca.sumsqr(s))
+    b.cost += cfg.weights.slack_l1 * ca.sum1(s) + cfg.weights.slack_l2 * ca.sumsqr(s)
 
 
 def _ped_gap(b: _Builder, pos: ca.SX, t: int, m: int, j: int) -> ca.SX:
