@@ -21,7 +21,7 @@ from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
-from planner import ForesightConfig, GuidanceConfig, RouteConfig
+from planner import CostWeights, ForesightConfig, GuidanceConfig, RouteConfig
 
 if TYPE_CHECKING:
     from envs.evaluation.suite import Suite
@@ -139,7 +139,8 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
                    help="override an MPCConfig field of the MPC policies (repeatable), e.g. safety_margin_m=0.4; on "
                    "top of the benchmark suite's planner defaults, if it has any (crowdnav suites lists them); a "
                    "nested config (route, guidance, foresight) takes none or default, or one field as "
-                   "NESTED.FIELD=VALUE, e.g. foresight.horizon_s=6")
+                   "NESTED.FIELD=VALUE, e.g. foresight.horizon_s=6; the cost weights one field at a time, e.g. "
+                   "weights.social=0.2")
 
 
 def add_backend_options(p: argparse.ArgumentParser) -> None:
@@ -160,6 +161,8 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
         if sep and "." in key:
             out.update(_nested_override(item, key, text, out))
             continue
+        if key in FIELDS_ONLY:
+            raise ValueError(f"--mpc {item!r}: {key} is set one field at a time, e.g. {key}.social=0.2")
         if not sep or key not in valid:
             if sep:
                 raise ValueError(unknown_name("--mpc field", key, valid))
@@ -170,18 +173,21 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
 
 NESTED = {"route": RouteConfig, "guidance": GuidanceConfig,  # --mpc FIELD=default gives these configs
           "foresight": ForesightConfig}
+# nested configs set one field at a time only (NESTED.FIELD=VALUE), on top of the env's MPC: the cost weights
+FIELDS_ONLY = {"weights": CostWeights}
 
 
 def _nested_override(item: str, key: str, text: str, out: dict[str, Any]) -> dict[str, Any]:
     """--mpc NESTED.FIELD=VALUE (e.g. foresight.horizon_s=6): that field of the nested config, on top of what an
     earlier item set, else of its defaults."""
     outer, _, inner = key.partition(".")
-    if outer not in NESTED:
-        raise ValueError(unknown_name("--mpc nested config", outer, NESTED))
-    valid = {f.name: f for f in fields(NESTED[outer])}
+    kinds = {**NESTED, **FIELDS_ONLY}
+    if outer not in kinds:
+        raise ValueError(unknown_name("--mpc nested config", outer, kinds))
+    valid = {f.name: f for f in fields(kinds[outer])}
     if inner not in valid:
         raise ValueError(unknown_name(f"--mpc {outer} field", inner, valid))
-    base = out.get(outer) or NESTED[outer]()
+    base = out.get(outer) or (getattr(ENV_MPC, outer) if outer in FIELDS_ONLY else NESTED[outer]())
     current = getattr(base, inner)
     if isinstance(current, tuple):
         raise ValueError(f"--mpc {item!r}: {outer}.{inner} is a tuple, which this option cannot set")

@@ -301,6 +301,27 @@ def test_a_nested_config_field_is_set_by_its_dotted_name():
         parse("guidance.heading_offsets_deg=10")
 
 
+def test_the_cost_weights_are_set_one_field_at_a_time_on_the_envs_own():
+    from envs.cli import build_parser
+    from envs.cli_options import policy_configs
+    from envs.policies import ENV_MPC
+
+    def parse(*items: str):
+        return policy_configs(build_parser().parse_args(
+            ["evaluate", "--policy", "mpc-cv", *(a for item in items for a in ("--mpc", item))]))[0].mpc
+
+    assert parse().weights == ENV_MPC.weights
+    mpc = parse("weights.social=0.2", "weights.goal=2")
+    assert mpc.weights == replace(ENV_MPC.weights, social=0.2, goal=2.0)  # the others stay the env's
+    assert mpc.weights.slack_l1 == ENV_MPC.weights.slack_l1
+    with pytest.raises(ValueError, match="must be >= 0"):  # CostWeights' own check
+        parse("weights.social=-1")
+    with pytest.raises(ValueError, match="did you mean"):
+        parse("weights.socal=0")
+    with pytest.raises(ValueError, match="one field at a time"):  # no whole-config form
+        parse("weights=default")
+
+
 def test_every_registry_policy_states_the_flags_it_reads():
     from envs.cli_options import FLAG_FIELDS, POLICY_FLAGS
     from envs.policies import POLICIES, PREDICTOR_POLICIES
