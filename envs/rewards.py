@@ -37,10 +37,15 @@ class StepFacts:
         return self.min_surface_distance_m < 0.0 or self.hit_wall
 
 
+def comfort_depth(min_surface_distance_m: float, comfort_m: float) -> float:
+    """How deep the robot is inside the comfort zone of width comfort_m (m) as a fraction: 0 at comfort_m surface
+    distance or more, 1 at contact or overlap."""
+    return min(max(comfort_m - min_surface_distance_m, 0.0), comfort_m) / comfort_m
+
+
 def reward_terms(facts: StepFacts, cfg: CrowdNavConfig) -> dict[str, float]:
     """The unweighted terms of one step (see the module docstring)."""
-    comfort = cfg.discomfort_distance_m
-    depth = min(max(comfort - facts.min_surface_distance_m, 0.0), comfort) / comfort
+    depth = comfort_depth(facts.min_surface_distance_m, cfg.discomfort_distance_m)
     return {
         "progress": facts.goal_distance_before_m - facts.goal_distance_after_m,
         "success": float(facts.reached_goal),

@@ -4,7 +4,12 @@ Terms of one env step, unweighted, read from the env's step info (`envs.env.Crow
 - collision: 1 on the step the robot touches a pedestrian or a wall (the episode ends there; the info's
   `episode_metrics["collision"]`, whatever the collision reward's weight), else 0;
 - group_intrusion: dt_s (s) when the robot's body overlaps a ground-truth group's region (the info's `intruding`),
-  else 0.
+  else 0;
+- discomfort: the reward's unweighted discomfort term (`envs.rewards.comfort_depth`: dt_s x how deep the robot is
+  inside the comfort zone, `CrowdNavConfig.discomfort_distance_m` (0.2 m) of surface distance to its nearest
+  pedestrian, as a fraction of it, from the info's `min_surface_distance_m`; s), whatever the reward's weight on it: a
+  near miss, which a policy can learn to avoid before it ever collides, where a collision costs once and ends the
+  episode.
 
 An env step costs sum_k weight_k x term_k (weights >= 0: `check_constraint`); an agent decision held for k env steps
 (`envs.rl.setting.DecisionPeriod`) costs the sum over its steps. `ConstraintCost`, a wrapper inside DecisionPeriod,
@@ -22,7 +27,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-CONSTRAINT_TERMS = ("collision", "group_intrusion")
+CONSTRAINT_TERMS = ("collision", "group_intrusion", "discomfort")
 EPISODE_COST_KEY = "episode_cost"  # in the step info: the weighted cost since the episode's reset
 
 
@@ -39,11 +44,25 @@ def check_constraint(weights: Iterable[tuple[str, float]]) -> dict[str, float]:
     return out
 
 
-def step_terms(info: dict[str, Any], dt_s: float) -> dict[str, float]:
-    """The unweighted cost terms of one env step from its info (module docstring); dt_s: the env's step, s."""
-    metrics = info.get("episode_metrics") or {}
-    return {"collision": float(bool(metrics.get("collision", False))),
-            "group_intrusion": dt_s * float(bool(info["intruding"]))}
+def step_terms(info: dict[str, Any], dt_s: float, names: Iterable[str] = CONSTRAINT_TERMS,
+               comfort_m: float = 0.2) -> dict[str, float]:
+    """The unweighted cost terms `names` of one env step from its info (module docstring); dt_s: the env's step, s;
+    comfort_m: the env's discomfort distance, m. An info without what a term reads (an env that is not `CrowdNavEnv`)
+    raises a KeyError naming the term."""
+    from envs.rewards import comfort_depth
+
+    readers = {
+        "collision": lambda: float(bool((info.get("episode_metrics") or {}).get("collision", False))),
+        "group_intrusion": lambda: dt_s * float(bool(info["intruding"])),
+        "discomfort": lambda: dt_s * comfort_depth(float(info["min_surface_distance_m"]), comfort_m),
+    }
+    out = {}
+    for name in names:
+        try:
+            out[name] = readers[name]()
+        except KeyError as err:
+            raise KeyError(f"cost term {name!r} needs the env's step info key {err}") from None
+    return out
 
 
 class ConstraintCost(gym.Wrapper):
@@ -53,6 +72,8 @@ class ConstraintCost(gym.Wrapper):
     def __init__(self, env: gym.Env, weights: dict[str, float], dt_s: float) -> None:
         super().__init__(env)
         self.weights, self.dt_s = check_constraint(weights.items()), float(dt_s)
+        config = getattr(env.unwrapped, "config", None)  # CrowdNavEnv's: its comfort zone (discomfort)
+        self.comfort_m = float(getattr(config, "discomfort_distance_m", 0.2))
         self.total = 0.0
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict]:
@@ -63,7 +84,7 @@ class ConstraintCost(gym.Wrapper):
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        terms = step_terms(info, self.dt_s)
+        terms = step_terms(info, self.dt_s, self.weights, self.comfort_m)
         self.total += sum(w * terms[k] for k, w in self.weights.items())
         info[EPISODE_COST_KEY] = self.total
         return obs, reward, terminated, truncated, info
@@ -99,9 +120,10 @@ def add_constraint_arguments(p: argparse.ArgumentParser, defaults: Any) -> None:
     p.add_argument("--constraint", action="append", default=None, metavar="TERM=WEIGHT[,TERM=WEIGHT]",
                    help="train constrained PPO (PPO-Lagrangian, docs/rl.md), keeping the mean episode cost within "
                         "--cost-budget; cost terms (repeatable or comma-separated): collision (1 per collision), "
-                        "group_intrusion (seconds inside a group) (default: none, plain PPO)")
-    flags = {"cost_budget": "constrained PPO: the mean episode cost allowed (collisions + intrusion seconds per "
-                            "episode, each times its --constraint weight)",
+                        "group_intrusion (seconds inside a group), discomfort (seconds within 0.2 m of a person, "
+                        "weighted by how near) (default: none, plain PPO)")
+    flags = {"cost_budget": "constrained PPO: the mean episode cost allowed (collisions + intrusion and "
+                            "discomfort seconds per episode, each times its --constraint weight)",
              "lambda_lr": "constrained PPO: the multiplier's step after each rollout, lambda += lr x (episode cost "
                           "- budget), floored at 0",
              "lambda_init": "constrained PPO: the multiplier at the start (>= 0)"}

@@ -179,6 +179,27 @@ def test_the_env_cost_counts_a_collision_once_and_intrusion_seconds_summed_over_
     assert decisions == pytest.approx(expected) and sum(decisions) == pytest.approx(total)
 
 
+def test_the_discomfort_cost_is_the_depth_into_the_comfort_zone_and_comes_before_a_collision():
+    from planner import RobotConfig
+
+    cfg = CrowdNavConfig(scenario="circle_crossing", n_pedestrians=6, robot=RobotConfig(model="holonomic"))
+    env = ConstraintCost(CrowdNavEnv(cfg), {"discomfort": 1.0}, cfg.dt_s)
+    env.reset(seed=0)
+    total, done, steps = 0.0, False, []
+    while not done:  # chase the nearest pedestrian into contact
+        _, _, term, trunc, info = env.step(_chase(env.unwrapped))
+        gap = info["min_surface_distance_m"]
+        depth = min(max(cfg.discomfort_distance_m - gap, 0.0), cfg.discomfort_distance_m) / cfg.discomfort_distance_m
+        steps.append(info["episode_cost"] - total)
+        assert steps[-1] == pytest.approx(cfg.dt_s * depth)  # 0 outside 0.2 m, dt_s at contact
+        total, done = info["episode_cost"], term or trunc
+    assert info["episode_metrics"]["collision"] and steps[-1] == pytest.approx(cfg.dt_s)
+    near = [s for s in steps[:-1] if s > 0]
+    assert near and 0 < min(near) < cfg.dt_s  # near misses cost before the contact, less than a contact's step
+    with pytest.raises(KeyError, match="'discomfort' needs the env's step info key 'min_surface_distance_m'"):
+        wrap_for_cost(Toll(), {"discomfort": 1.0}, dt_s=1.0).step(np.ones(1, np.float32))
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--constraint", "bogus=1", "--cost-budget", "0.1"], "unknown constraint term 'bogus'; valid: collision"),
     (["--constraint", "collision"], "expected TERM=WEIGHT"),
