@@ -207,8 +207,7 @@ def _group_arrays(stage_pos: np.ndarray, radii: np.ndarray, groups: list[np.ndar
         pts = np.transpose(stage_pos[:, :, members], (1, 0, 2, 3))  # (H, K, n, 2)
         a, b, rad = group_capsules(pts, radii[members])
         grp_a[:, slot], grp_b[:, slot] = a, b
-        margin = cfg.safety_margin_m if cfg.group_margin_m is None else cfg.group_margin_m
-        clear = rad + cfg.robot.radius_m + margin
+        clear = rad + cfg.robot.radius_m + cfg.safety_margin_m
         too_wide = np.linalg.norm(b - a, axis=-1) > cfg.max_group_span_m
         grp_clear[:, slot] = np.where(too_wide, -FAR_M, clear)  # -FAR_M: constraint always satisfied
         grp_mask[slot] = 1.0
