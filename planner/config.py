@@ -185,9 +185,6 @@ class MPCConfig:
     # added to the robot radius against walls, which are known exactly; None: safety_margin_m (before 2026-11-25
     # the only margin: 0.3 m in CROWD_MPC left 0.6 m to each jamb, and a 1 m door could not be entered)
     wall_margin_m: float | None = None
-    # in place of safety_margin_m for the members of predicted groups (>= 2 people) and the group regions; None:
-    # safety_margin_m
-    group_margin_m: float | None = None
     check_midpoints: bool = False  # also check clearances half-way through each plan step (2x cost)
     comfort_distance_m: float = 1.0  # length scale of the social-comfort cost
     time_budget_s: float = 0.2  # wall-time budget of one solve; over it counts as a timeout
@@ -235,8 +232,6 @@ class MPCConfig:
                                "max_group_span_m", "time_budget_s", "max_iter", "tolerance"))
         if self.wall_margin_m is not None:
             _check_non_negative(self, ("wall_margin_m",))
-        if self.group_margin_m is not None:
-            _check_non_negative(self, ("group_margin_m",))
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))

@@ -207,22 +207,11 @@ def _group_arrays(stage_pos: np.ndarray, radii: np.ndarray, groups: list[np.ndar
         pts = np.transpose(stage_pos[:, :, members], (1, 0, 2, 3))  # (H, K, n, 2)
         a, b, rad = group_capsules(pts, radii[members])
         grp_a[:, slot], grp_b[:, slot] = a, b
-        margin = cfg.safety_margin_m if cfg.group_margin_m is None else cfg.group_margin_m
-        clear = rad + cfg.robot.radius_m + margin
+        clear = rad + cfg.robot.radius_m + cfg.safety_margin_m
         too_wide = np.linalg.norm(b - a, axis=-1) > cfg.max_group_span_m
         grp_clear[:, slot] = np.where(too_wide, -FAR_M, clear)  # -FAR_M: constraint always satisfied
         grp_mask[slot] = 1.0
     return grp_a, grp_b, grp_clear, grp_mask
-
-
-def _member_extra(group_ids: np.ndarray, mask: np.ndarray, order: np.ndarray, cfg: MPCConfig) -> np.ndarray:
-    """Extra clearance (m) for each constrained pedestrian `order` (M',): group_margin_m - safety_margin_m for the
-    members of predicted groups of >= 2 valid pedestrians, 0 for those walking alone (and 0 without group_margin_m)."""
-    if cfg.group_margin_m is None or order.size == 0:
-        return np.zeros(order.size)
-    ids, counts = np.unique(group_ids[mask], return_counts=True)
-    grouped = np.isin(group_ids[order], ids[counts >= 2])
-    return np.where(grouped, cfg.group_margin_m - cfg.safety_margin_m, 0.0)
 
 
 def _start_penetration(robot_xy, now, radii, real, obstacles, robot_radius: float) -> float:
@@ -260,7 +249,7 @@ def build_scene(state: np.ndarray, pred: PedPrediction, obstacles: np.ndarray | 
     ped_pos = np.broadcast_to(robot_xy + FAR_M, (sub * h, m, k, 2)).copy()
     ped_pos[:, : order.size] = np.transpose(stage_pos[:, :, order], (1, 2, 0, 3))
     ped_clear = np.full((sub * h, m), cfg.robot.radius_m + cfg.safety_margin_m)
-    ped_clear[:, : order.size] += radii[order] + _member_extra(group_ids, mask, order, cfg)
+    ped_clear[:, : order.size] += radii[order]
     if order.size and (cfg.clearance_growth_mps > 0 or cfg.spread_inflation > 0):
         spread = resample_scalar(sample_spread(raw[:, :, order]), pred.step_s, cfg.dt_s / sub, sub * h)
         ped_clear[:, : order.size] += clearance_inflation(spread, cfg, cfg.dt_s / sub)

@@ -81,19 +81,6 @@ def test_build_scene_pads_and_picks_nearest():
     assert empty.wall_mask.tolist() == [0.0, 0.0]
 
 
-def test_a_group_margin_widens_the_group_regions_and_the_members_not_those_alone():
-    hist = np.array([[[1.0, 0.0], [5.0, 0.0], [2.0, 0.0]]] * 2)
-    pred = constant_velocity_prediction(hist, group_ids=np.array([0, 1, 1]), mask=np.ones(3, bool), **PRED)
-    base = build_scene(np.zeros(2), pred, None, MPCConfig(max_peds=2, max_groups=1, n_modes=1, safety_margin_m=0.1))
-    wide = build_scene(np.zeros(2), pred, None, MPCConfig(max_peds=2, max_groups=1, n_modes=1, safety_margin_m=0.1,
-                                                          group_margin_m=0.3))
-    assert np.allclose(wide.grp_clear - base.grp_clear, 0.2)  # the group regions 0.2 m wider
-    assert list(base.ped_index) == [0, 2]  # person 0 walks alone, person 2 with person 1
-    assert np.allclose(wide.ped_clear - base.ped_clear, [0.0, 0.2])  # the member 0.2 m wider, the lone walker not
-    with pytest.raises(ValueError, match="group_margin_m"):
-        MPCConfig(group_margin_m=-0.1)
-
-
 @pytest.mark.parametrize("bad", ["shape", "radii", "mask", "inf"])
 def test_invalid_predictions_raise_clear_errors(bad):
     positions, radii, gids, mask = np.zeros((2, 12, 3, 2)), np.full(3, 0.3), np.arange(3), np.ones(3, bool)
