@@ -27,8 +27,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from envs.config import CrowdNavConfig
+from envs.rewards import comfort_depth
+
 CONSTRAINT_TERMS = ("collision", "group_intrusion", "discomfort")
 EPISODE_COST_KEY = "episode_cost"  # in the step info: the weighted cost since the episode's reset
+COMFORT_M = CrowdNavConfig.discomfort_distance_m  # the env's default comfort zone, m (discomfort)
 
 
 def check_constraint(weights: Iterable[tuple[str, float]]) -> dict[str, float]:
@@ -45,12 +49,10 @@ def check_constraint(weights: Iterable[tuple[str, float]]) -> dict[str, float]:
 
 
 def step_terms(info: dict[str, Any], dt_s: float, names: Iterable[str] = CONSTRAINT_TERMS,
-               comfort_m: float = 0.2) -> dict[str, float]:
+               comfort_m: float = COMFORT_M) -> dict[str, float]:
     """The unweighted cost terms `names` of one env step from its info (module docstring); dt_s: the env's step, s;
     comfort_m: the env's discomfort distance, m. An info without what a term reads (an env that is not `CrowdNavEnv`)
     raises a KeyError naming the term."""
-    from envs.rewards import comfort_depth
-
     readers = {
         "collision": lambda: float(bool((info.get("episode_metrics") or {}).get("collision", False))),
         "group_intrusion": lambda: dt_s * float(bool(info["intruding"])),
@@ -73,7 +75,7 @@ class ConstraintCost(gym.Wrapper):
         super().__init__(env)
         self.weights, self.dt_s = check_constraint(weights.items()), float(dt_s)
         config = getattr(env.unwrapped, "config", None)  # CrowdNavEnv's: its comfort zone (discomfort)
-        self.comfort_m = float(getattr(config, "discomfort_distance_m", 0.2))
+        self.comfort_m = float(getattr(config, "discomfort_distance_m", COMFORT_M))
         self.total = 0.0
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict]:
