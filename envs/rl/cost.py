@@ -48,20 +48,23 @@ def check_constraint(weights: Iterable[tuple[str, float]]) -> dict[str, float]:
     return out
 
 
+# what each term reads from one step's info: (info, dt_s, comfort_m) -> unweighted term (module docstring)
+_READERS = {
+    "collision": lambda info, dt_s, comfort_m: float(bool((info.get("episode_metrics") or {}).get("collision", False))),
+    "group_intrusion": lambda info, dt_s, comfort_m: dt_s * float(bool(info["intruding"])),
+    "discomfort": lambda info, dt_s, comfort_m: dt_s * comfort_depth(float(info["min_surface_distance_m"]), comfort_m),
+}
+
+
 def step_terms(info: dict[str, Any], dt_s: float, names: Iterable[str] = CONSTRAINT_TERMS,
                comfort_m: float = COMFORT_M) -> dict[str, float]:
     """The unweighted cost terms `names` of one env step from its info (module docstring); dt_s: the env's step, s;
     comfort_m: the env's discomfort distance, m. An info without what a term reads (an env that is not `CrowdNavEnv`)
     raises a KeyError naming the term."""
-    readers = {
-        "collision": lambda: float(bool((info.get("episode_metrics") or {}).get("collision", False))),
-        "group_intrusion": lambda: dt_s * float(bool(info["intruding"])),
-        "discomfort": lambda: dt_s * comfort_depth(float(info["min_surface_distance_m"]), comfort_m),
-    }
     out = {}
     for name in names:
         try:
-            out[name] = readers[name]()
+            out[name] = _READERS[name](info, dt_s, comfort_m)
         except KeyError as err:
             raise KeyError(f"cost term {name!r} needs the env's step info key {err}") from None
     return out
