@@ -31,6 +31,7 @@ from planner.config import (
     MPCConfig,
     RobotConfig,
     RouteConfig,
+    SamplingConfig,
 )
 from planner.dynamics import brake_control, clip_control, model_dims, robot_dynamics, rollout, step_robot
 from planner.mpc import MPCPlanner
@@ -63,6 +64,7 @@ __all__ = [
     "ReactiveForceParams",
     "RobotConfig",
     "RouteConfig",
+    "SamplingConfig",
     "Router",
     "SocialForcePlanner",
     "brake_control",

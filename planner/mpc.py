@@ -27,6 +27,7 @@ from planner.ocp import OCP, build_ocp, pack_params, param_slices
 from planner.prediction import PedPrediction, current_positions, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
 from planner.route import Router
+from planner.sampling import arbitrate, make_candidates
 from planner.scene import FAR_M, SceneArrays, build_scene, validate_obstacles
 from planner.shield import shield_control
 
@@ -133,6 +134,7 @@ class MPCPlanner:
             shifted = self._shift(self._plan)
             self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
         routed = time.perf_counter()
+        subgoal = goal
         try:
             subgoal = self._subgoal(state, goal, prediction, obstacles)
             routed = time.perf_counter() - routed
@@ -140,6 +142,8 @@ class MPCPlanner:
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
         except Exception as exc:  # never raise inside the control loop
             result = self._fallback(state, "solver_error", f"{type(exc).__name__}: {exc}", 0.0, 0, np.inf)
+        if self.config.sampling is not None:
+            result = self._arbitrate(result, state, subgoal, goal, prediction, obstacles)
         if self.config.shield_horizon_s > 0:
             result = self._shield(result, state, prediction, obstacles)
         result = replace(result, plan_time_s=time.perf_counter() - called)
@@ -157,11 +161,33 @@ class MPCPlanner:
             subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles, goal)
         return subgoal
 
+    def _arbitrate(self, result: PlanResult, state: np.ndarray, subgoal: np.ndarray, goal: np.ndarray,
+                   prediction: PedPrediction, obstacles: np.ndarray | None) -> PlanResult:
+        """``result`` or, where the sampling arbiter (planner/sampling.py) finds a clearly cheaper candidate, that
+        candidate's plan (stored as the next warm start); the next-best candidates become the shield's passing
+        options. Its wall time is added to ``solve_time_s``; an error keeps ``result`` (never raises)."""
+        start, h = time.perf_counter(), self.config.horizon_steps
+        try:
+            cands = make_candidates(state, subgoal, result.controls, self.config)
+            ends = cands.states[:, -1, :2]
+            togo = self.router.cost_to_go(ends, goal) if self.router is not None else np.linalg.norm(ends - goal, axis=1)
+            verdict = arbitrate(cands, togo, prediction, obstacles, self.config)
+        except Exception:  # the MPC's own answer stands
+            return result
+        self._options = [(cands.states[i, : h + 1], cands.controls[i, :h], None) for i in verdict.options]
+        elapsed = time.perf_counter() - start
+        if verdict.chosen == 0:
+            return replace(result, solve_time_s=result.solve_time_s + elapsed)
+        states, controls = cands.states[verdict.chosen, : h + 1], cands.controls[verdict.chosen, :h]
+        self._plan = _Plan(states, controls, 0)
+        return replace(result, control=controls[0].copy(), states=states, controls=controls, arbitrated=True,
+                       solve_time_s=result.solve_time_s + elapsed)
+
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:
         """``result`` with its first control checked by the safety shield (planner/shield.py); the shield's
         wall time is added to ``solve_time_s``. A shield error keeps the plan's control (never raises)."""
         start = time.perf_counter()
-        options = self._options if result.status == "solved" else []
+        options = self._options if result.status == "solved" or self.config.sampling is not None else []
         try:
             verdict = shield_control(state, result.controls, prediction, obstacles, self.config,
                                      np.array([controls for _, controls, _ in options]) if options else None)
