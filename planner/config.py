@@ -184,16 +184,18 @@ class SamplingConfig:
     shortfall_cost_sps: float = 10.0  # per metre of shortfall below a margin, per second, discounted
     tau_s: float = 3.0  # time constant of the discount on later risk
     cv_weight: float = 0.25  # share of the risk given to the constant-velocity future (when the prediction has history)
-    keep_plan_s: float = 0.5  # the MPC's own plan wins unless another candidate is this much cheaper
+    plan_risk_s: float = 1.0  # the MPC's plan is kept while its risk cost is at most this (no other is considered)
+    keep_plan_s: float = 0.5  # otherwise it still wins unless another candidate is this much cheaper
     n_options: int = 3  # the next-best candidates (distinct first commands) handed to the safety shield
 
     def __post_init__(self) -> None:
         _check_positive(self, ("horizon_s", "n_speeds", "n_turns", "contact_cost_s", "tau_s"))
-        _check_non_negative(self, ("margin_m", "group_margin_m", "shortfall_cost_sps", "keep_plan_s", "n_options"))
+        _check_non_negative(self, ("margin_m", "group_margin_m", "shortfall_cost_sps", "plan_risk_s", "keep_plan_s",
+                                   "n_options"))
         if not 0.0 <= self.cv_weight <= 1.0:
             raise ValueError(f"SamplingConfig.cv_weight must be in [0, 1], got {self.cv_weight!r}")
         for name in ("horizon_s", "margin_m", "group_margin_m", "contact_cost_s", "shortfall_cost_sps", "tau_s",
-                     "keep_plan_s"):
+                     "plan_risk_s", "keep_plan_s"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"SamplingConfig.{name} must be finite, got {getattr(self, name)!r}")
         if self.n_speeds < 2 or self.n_turns < 1:

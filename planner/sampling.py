@@ -16,9 +16,11 @@ option is clearly better:
 3. **Cost** (seconds): the time the rest of the way would take from the candidate's end at top speed (along the
    global route when there is one), plus per future, averaged: `contact_cost_s` x exp(-t / tau_s) at its first
    contact with a person, and `shortfall_cost_sps` x the discounted shortfall below `margin_m` (people) and
-   `group_margin_m` (the capsule of each predicted group of two or more, as the MPC's group regions); a wall contact
+   `group_margin_m` (the capsule of each predicted group of two or more, as the MPC's group regions, whose overlap
+   costs as a contact does); a wall contact
    excludes a candidate unless every one has it.
-4. **Choice**: the cheapest candidate, unless the MPC's plan is within `keep_plan_s` of it. A chosen candidate's first
+4. **Choice**: the MPC's plan while its risk over its own horizon is at most `plan_risk_s` (the MPC is the better local
+   optimiser where its plan is safe, and it plans again before its horizon ends); otherwise the cheapest candidate, unless the MPC's plan is within `keep_plan_s` of it. A chosen candidate's first
    `horizon_steps` steps become the plan (and the MPC's warm start at the next call); the next-best candidates with
    other first commands are handed to the safety shield as passing options.
 
@@ -255,16 +257,21 @@ def risk_costs(points: np.ndarray, prediction: PedPrediction, cfg: MPCConfig, ro
     fut, radii, gids = fut[:, :, near], radii[near], gids[near]
     disc = np.exp(-times / sc.tau_s)
     ped = person_clearance(points, np.ascontiguousarray(fut), radii) - robot.radius_m  # (C, F, T)
-    hit = ped < 0.0
-    first = np.where(hit.any(-1), disc[np.argmax(hit, axis=-1)], 0.0)  # (C, F)
-    per = sc.contact_cost_s * first + sc.shortfall_cost_sps * step * (np.maximum(sc.margin_m - ped, 0.0) * disc).sum(-1)
+    per = _exposure(ped, sc.margin_m, disc, sc, step)
     seg, rad = group_segments(fut, radii, gids, cfg.max_group_span_m)
-    if seg.shape[2]:
-        grp = capsule_clearance(points, seg, rad) - robot.radius_m
-        per = per + sc.shortfall_cost_sps * step * (np.maximum(sc.group_margin_m - grp, 0.0) * disc).sum(-1)
+    if seg.shape[2]:  # entering a group's region costs as a contact does
+        per = per + _exposure(capsule_clearance(points, seg, rad) - robot.radius_m, sc.group_margin_m, disc, sc, step)
     if not has_cv:
         return per.mean(-1)
     return (1.0 - sc.cv_weight) * per[:, :-1].mean(-1) + sc.cv_weight * per[:, -1]
+
+
+def _exposure(clear: np.ndarray, margin_m: float, disc: np.ndarray, sc: SamplingConfig, step_s: float) -> np.ndarray:
+    """Per candidate and future (C, F) s, from clearances (C, F, T) m at times discounted by disc (T,): the contact cost
+    discounted at the first overlap (clearance < 0), plus the discounted shortfall below margin_m (m s) priced."""
+    hit = clear < 0.0
+    first = np.where(hit.any(-1), disc[np.argmax(hit, axis=-1)], 0.0)
+    return sc.contact_cost_s * first + sc.shortfall_cost_sps * step_s * (np.maximum(margin_m - clear, 0.0) * disc).sum(-1)
 
 
 def arbitrate(cands: Candidates, togo_m: np.ndarray, prediction: PedPrediction, walls: np.ndarray | None,
@@ -274,10 +281,11 @@ def arbitrate(cands: Candidates, togo_m: np.ndarray, prediction: PedPrediction, 
     sc, robot = cfg.sampling, cfg.robot
     assert sc is not None
     points = check_points(cands.states, cands.controls, cfg.dt_s, robot.model)
-    cost = togo_m / robot.max_speed_mps + risk_costs(points, prediction, cfg, cands.states[0, 0, :2])
-    cost = cost + WALL_COST_S * (wall_clearance(points, walls) < robot.radius_m).any(-1)
+    risk = risk_costs(points, prediction, cfg, cands.states[0, 0, :2])
+    cost = togo_m / robot.max_speed_mps + risk + WALL_COST_S * (wall_clearance(points, walls) < robot.radius_m).any(-1)
     cost[0] -= sc.keep_plan_s
-    chosen = int(np.argmin(cost))
+    own = risk_costs(points[:1, : 2 * cfg.horizon_steps], prediction, cfg, cands.states[0, 0, :2])[0]  # its horizon
+    chosen = 0 if own <= sc.plan_risk_s else int(np.argmin(cost))
     cost[0] += sc.keep_plan_s
     order = np.argsort(cost, kind="stable")
     seen = [cands.first[chosen]]
