@@ -196,8 +196,8 @@ def _nested_override(item: str, key: str, text: str, out: dict[str, Any]) -> dic
 
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
     """The value of one --mpc FIELD=VALUE: a scalar of the field's type, `none` for an optional field, and for
-    the nested configs (`NESTED`: `route`, `guidance`, `foresight`, `sampling`) one of none (e.g. no global route) or default (e.g.
-    `planner.RouteConfig()`)."""
+    the nested configs (`NESTED`: `route`, `guidance`, `foresight`, `sampling`) one of none (e.g. no global route) or
+    default (e.g. `planner.RouteConfig()`)."""
     if optional and text.lower() == "none":
         return None
     if key in NESTED:

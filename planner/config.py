@@ -199,7 +199,8 @@ class SamplingConfig:
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"SamplingConfig.{name} must be finite, got {getattr(self, name)!r}")
         if self.n_speeds < 2 or self.n_turns < 1:
-            raise ValueError(f"SamplingConfig needs n_speeds >= 2 and n_turns >= 1, got {self.n_speeds}, {self.n_turns}")
+            raise ValueError(f"SamplingConfig needs n_speeds >= 2 and n_turns >= 1, got {self.n_speeds}, "
+                             f"{self.n_turns}")
         if not self.first_steps or not all(isinstance(k, int) and k >= 1 for k in self.first_steps):
             raise ValueError(f"SamplingConfig.first_steps must be integers >= 1, got {self.first_steps!r}")
         if not self.tail_speeds or not all(0.0 < v <= 1.0 for v in self.tail_speeds):
@@ -258,7 +259,7 @@ class MPCConfig:
     guidance: GuidanceConfig | None = None
     # -- foresight search (planner/foresight.py); None (default): off ----------------------------------------------
     foresight: ForesightConfig | None = None
-    # -- sampling arbiter (planner/sampling.py); None (default): the MPC's plan is applied as solved --------------------
+    # -- sampling arbiter (planner/sampling.py); None (default): the MPC's plan is applied as solved ----------------
     sampling: SamplingConfig | None = None
 
     @property

@@ -170,7 +170,8 @@ class MPCPlanner:
         try:
             cands = make_candidates(state, subgoal, result.controls, self.config)
             ends = cands.states[:, -1, :2]
-            togo = self.router.cost_to_go(ends, goal) if self.router is not None else np.linalg.norm(ends - goal, axis=1)
+            togo = self.router.cost_to_go(ends, goal) if self.router is not None else \
+                np.linalg.norm(ends - goal, axis=1)
             verdict = arbitrate(cands, togo, prediction, obstacles, self.config)
         except Exception:  # the MPC's own answer stands
             return result

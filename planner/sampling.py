@@ -17,12 +17,12 @@ option is clearly better:
    global route when there is one), plus per future, averaged: `contact_cost_s` x exp(-t / tau_s) at its first
    contact with a person, and `shortfall_cost_sps` x the discounted shortfall below `margin_m` (people) and
    `group_margin_m` (the capsule of each predicted group of two or more, as the MPC's group regions, whose overlap
-   costs as a contact does); a wall contact
-   excludes a candidate unless every one has it.
+   costs as a contact does); a wall contact excludes a candidate unless every one has it.
 4. **Choice**: the MPC's plan while its risk over its own horizon is at most `plan_risk_s` (the MPC is the better local
-   optimiser where its plan is safe, and it plans again before its horizon ends); otherwise the cheapest candidate, unless the MPC's plan is within `keep_plan_s` of it. A chosen candidate's first
-   `horizon_steps` steps become the plan (and the MPC's warm start at the next call); the next-best candidates with
-   other first commands are handed to the safety shield as passing options.
+   optimiser where its plan is safe, and it plans again before its horizon ends); otherwise the cheapest candidate,
+   unless the MPC's plan is within `keep_plan_s` of it. A chosen candidate's first `horizon_steps` steps become the
+   plan (and the MPC's warm start at the next call); the next-best candidates with other first commands are handed to
+   the safety shield as passing options.
 
 Functions are pure: arrays in, arrays out; shapes and units in each docstring.
 """
@@ -31,7 +31,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from planner.config import MPCConfig, SamplingConfig
@@ -102,7 +101,8 @@ def make_candidates(state: np.ndarray, target: np.ndarray, plan_controls: np.nda
         prefix[0, :h] = plan_controls[:h]
         n_first[0] = h
         last = np.asarray(plan_controls[h - 1], float)
-        tail[0] = max(float(last[0]) if robot.model == "unicycle" else float(np.hypot(*last)), 0.3 * robot.max_speed_mps)
+        speed = float(last[0]) if robot.model == "unicycle" else float(np.hypot(*last))
+        tail[0] = max(speed, 0.3 * robot.max_speed_mps)
     states, controls = rollout_two_phase(state, prefix, n_first, tail, target, cfg)
     first = controls[:, 0].copy() if plan_controls is None else np.vstack([plan_controls[:1], prefix[1:, 0]])
     return Candidates(states, controls, first)
@@ -177,52 +177,6 @@ def futures_at(prediction: PedPrediction, times: np.ndarray, with_cv: bool) -> t
     return out, np.asarray(prediction.radii, float)[real], has_cv
 
 
-@numba.njit(cache=True)
-def person_clearance(points: np.ndarray, futures: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Smallest centre distance minus the person's radius (m), robot points (C, T, 2) against futures (F, T, n, 2)
-    with radii (n,): (C, F, T); +inf without people."""
-    c, t = points.shape[0], points.shape[1]
-    f, n = futures.shape[0], futures.shape[2]
-    out = np.full((c, f, t), np.inf)
-    for a in range(c):
-        for b in range(f):
-            for s in range(t):
-                px, py = points[a, s, 0], points[a, s, 1]
-                best = np.inf
-                for j in range(n):
-                    dx, dy = px - futures[b, s, j, 0], py - futures[b, s, j, 1]
-                    d = np.sqrt(dx * dx + dy * dy) - radii[j]
-                    if d < best:
-                        best = d
-                out[a, b, s] = best
-    return out
-
-
-@numba.njit(cache=True)
-def capsule_clearance(points: np.ndarray, seg: np.ndarray, rad: np.ndarray) -> np.ndarray:
-    """Smallest distance to a capsule's axis minus its radius (m), robot points (C, T, 2) against capsules seg
-    (F, T, G, 4) (x0, y0, x1, y1) with radii rad (F, T, G): (C, F, T); +inf without capsules."""
-    c, t = points.shape[0], points.shape[1]
-    f, g = seg.shape[0], seg.shape[2]
-    out = np.full((c, f, t), np.inf)
-    for a in range(c):
-        for b in range(f):
-            for s in range(t):
-                px, py = points[a, s, 0], points[a, s, 1]
-                best = np.inf
-                for j in range(g):
-                    ax, ay, bx, by = seg[b, s, j, 0], seg[b, s, j, 1], seg[b, s, j, 2], seg[b, s, j, 3]
-                    ex, ey = bx - ax, by - ay
-                    den = ex * ex + ey * ey
-                    u = 0.0 if den < 1e-12 else min(max(((px - ax) * ex + (py - ay) * ey) / den, 0.0), 1.0)
-                    dx, dy = px - ax - u * ex, py - ay - u * ey
-                    d = np.sqrt(dx * dx + dy * dy) - rad[b, s, j]
-                    if d < best:
-                        best = d
-                out[a, b, s] = best
-    return out
-
-
 def group_segments(futures: np.ndarray, radii: np.ndarray, group_ids: np.ndarray,
                    max_span_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Capsules of each group of >= 2 people: futures (F, T, n, 2), radii (n,), group ids (n,) -> axes (F, T, G, 4)
@@ -256,6 +210,8 @@ def risk_costs(points: np.ndarray, prediction: PedPrediction, cfg: MPCConfig, ro
     near = np.linalg.norm(fut[:, 0] - robot_xy, axis=-1).min(0) - radii < reach
     fut, radii, gids = fut[:, :, near], radii[near], gids[near]
     disc = np.exp(-times / sc.tau_s)
+    from planner.kernels import capsule_clearance, person_clearance  # numba: `import planner` stays numpy + casadi
+
     ped = person_clearance(points, np.ascontiguousarray(fut), radii) - robot.radius_m  # (C, F, T)
     per = _exposure(ped, sc.margin_m, disc, sc, step)
     seg, rad = group_segments(fut, radii, gids, cfg.max_group_span_m)
@@ -271,7 +227,8 @@ def _exposure(clear: np.ndarray, margin_m: float, disc: np.ndarray, sc: Sampling
     discounted at the first overlap (clearance < 0), plus the discounted shortfall below margin_m (m s) priced."""
     hit = clear < 0.0
     first = np.where(hit.any(-1), disc[np.argmax(hit, axis=-1)], 0.0)
-    return sc.contact_cost_s * first + sc.shortfall_cost_sps * step_s * (np.maximum(margin_m - clear, 0.0) * disc).sum(-1)
+    shortfall = (np.maximum(margin_m - clear, 0.0) * disc).sum(-1)
+    return sc.contact_cost_s * first + sc.shortfall_cost_sps * step_s * shortfall
 
 
 def arbitrate(cands: Candidates, togo_m: np.ndarray, prediction: PedPrediction, walls: np.ndarray | None,

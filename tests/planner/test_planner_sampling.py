@@ -11,15 +11,8 @@ import pytest
 
 from planner import MPCConfig, MPCPlanner, PedPrediction, PlanResult, RobotConfig, RouteConfig, Router, SamplingConfig
 from planner.dynamics import step_numpy
-from planner.sampling import (
-    arbitrate,
-    capsule_clearance,
-    check_points,
-    futures_at,
-    make_candidates,
-    person_clearance,
-    view_steps,
-)
+from planner.kernels import capsule_clearance, person_clearance
+from planner.sampling import arbitrate, check_points, futures_at, make_candidates, view_steps
 from planner.scene import point_segment_distances
 
 RADIUS = 0.3
