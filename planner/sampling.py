@@ -41,7 +41,6 @@ from planner.shield import command_grid
 
 HEADING_GAIN = 2.5  # rad/s of yaw rate per rad of heading error in the second phase
 WALL_COST_S = 1e6  # added to a candidate whose body touches a wall: chosen only if every one does
-REACH_PAD_M = 1.0  # people farther than (robot + person top speed) x view + this from the robot are left out
 
 
 @dataclass(frozen=True)
@@ -193,6 +192,22 @@ def group_segments(futures: np.ndarray, radii: np.ndarray, group_ids: np.ndarray
     return seg, rad
 
 
+def within_reach(fut: np.ndarray, radii: np.ndarray, gids: np.ndarray, robot_xy: np.ndarray, times: np.ndarray,
+                 cfg: MPCConfig) -> np.ndarray:
+    """(n,) bool: the people who can matter to some candidate: those some future (F, T, n, 2) m at times (T,) s brings
+    within the larger margin of a point the robot (at robot_xy (2,) m now) could reach by then at top speed, with
+    every member of a group of two or more of whom one can matter (a group's capsule reaches up to
+    `max_group_span_m` beyond its members). The others cost nothing to any candidate: leaving them out changes no
+    cost."""
+    sc = cfg.sampling
+    assert sc is not None
+    _, inverse, counts = np.unique(gids, return_inverse=True, return_counts=True)
+    pad = np.where(counts[inverse] >= 2, cfg.max_group_span_m, 0.0)
+    gap = np.linalg.norm(fut - robot_xy, axis=-1) - cfg.robot.max_speed_mps * times[:, None]  # (F, T, n)
+    near = gap.min(axis=(0, 1)) - radii - cfg.robot.radius_m - pad < max(sc.margin_m, sc.group_margin_m)
+    return near | np.isin(inverse, inverse[near & (counts[inverse] >= 2)])
+
+
 def risk_costs(points: np.ndarray, prediction: PedPrediction, cfg: MPCConfig, robot_xy: np.ndarray) -> np.ndarray:
     """Each candidate's expected risk (C,) s from its check points (C, T, 2) m (`check_points`), averaged over the
     predicted samples, the constant-velocity future (when there is one) weighted `cv_weight`: per future a contact
@@ -206,8 +221,7 @@ def risk_costs(points: np.ndarray, prediction: PedPrediction, cfg: MPCConfig, ro
     gids = np.asarray(prediction.group_ids)[np.asarray(prediction.mask, bool)]
     if fut.shape[2] == 0:
         return np.zeros(len(points))
-    reach = (robot.max_speed_mps + 2.0) * times[-1] + REACH_PAD_M  # people walk at most ~2 m/s
-    near = np.linalg.norm(fut[:, 0] - robot_xy, axis=-1).min(0) - radii < reach
+    near = within_reach(fut, radii, gids, robot_xy, times, cfg)
     fut, radii, gids = fut[:, :, near], radii[near], gids[near]
     disc = np.exp(-times / sc.tau_s)
     from planner.kernels import capsule_clearance, person_clearance  # numba: `import planner` stays numpy + casadi

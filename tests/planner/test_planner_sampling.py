@@ -168,3 +168,26 @@ def test_the_way_left_follows_the_route_round_a_wall() -> None:
 def test_bad_sampling_settings_are_refused(bad: dict) -> None:
     with pytest.raises(ValueError, match="SamplingConfig"):
         SamplingConfig(**bad)
+
+
+def test_leaving_out_the_people_out_of_reach_changes_no_cost() -> None:
+    """The reach filter is exact: the costs with everyone and with only those within reach are the same."""
+    import planner.sampling as sampling
+
+    rng = np.random.default_rng(5)
+    start = rng.uniform(-12.0, 12.0, (40, 2))
+    crowd = _people(start, rng.normal(0.0, 1.0, (40, 2)), groups=np.repeat(np.arange(20), 2), k=6)
+    crowd = replace(crowd, positions=crowd.positions + rng.normal(0.0, 0.2, crowd.positions.shape))
+    cands = make_candidates(np.array([0.0, 0.0, 0.0, 1.0, 0.0]), np.array([10.0, 0.0]), _straight(1.0, 10), CFG)
+    pts = check_points(cands.states, cands.controls, CFG.dt_s, "unicycle")
+    times = CFG.dt_s / 2 * np.arange(1, pts.shape[1] + 1)
+    fut, radii, _ = futures_at(crowd, times, True)
+    kept = sampling.within_reach(fut, radii, crowd.group_ids, np.zeros(2), times, CFG)
+    assert 0 < kept.sum() < 40
+    everyone = sampling.within_reach
+    try:
+        sampling.within_reach = lambda fut, *a: np.ones(fut.shape[2], bool)
+        full = sampling.risk_costs(pts, crowd, CFG, np.zeros(2))
+    finally:
+        sampling.within_reach = everyone
+    assert np.allclose(sampling.risk_costs(pts, crowd, CFG, np.zeros(2)), full)
