@@ -234,6 +234,10 @@ class MPCConfig:
     # inf (default) trusts the soft constraints. Starts in collision are always rejected.
     max_slack_m: float = float("inf")
     max_plan_reuse_steps: int = 3  # how many steps a previous plan may be replayed in fallback
+    # time between plan() calls, s: the stored plan (warm start and fallback) is advanced by this much per call, along
+    # its own motion; None: dt_s, one whole plan step per call (before 2026-11-29 always, though the env's policies
+    # call every 0.1 s: their warm start ran 0.3 s ahead of the robot)
+    call_period_s: float | None = None
     # Passing options: solve from the n_starts cheapest distinct initial guesses (the shifted plan and the go-to-goal
     # rollouts at HEADING_OFFSETS_RAD, which pass people on different sides) and keep the solved plan of lowest
     # cost; 1 (default) = one solve from the cheapest guess, the MPC before 2026-11-28. Costs up to n_starts solves.
@@ -274,6 +278,9 @@ class MPCConfig:
                                "max_group_span_m", "time_budget_s", "max_iter", "tolerance"))
         if self.wall_margin_m is not None:
             _check_non_negative(self, ("wall_margin_m",))
+        if self.call_period_s is not None and not (math.isfinite(self.call_period_s) and
+                                                   0.0 < self.call_period_s <= self.dt_s):
+            raise ValueError(f"MPCConfig.call_period_s must be in (0, dt_s], got {self.call_period_s!r}")
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))

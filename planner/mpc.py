@@ -53,11 +53,13 @@ class _Try:
 
 @dataclass(frozen=True)
 class _Plan:
-    """A stored plan starting at the current step: states (H+1, nz), controls (H, nu); age in steps."""
+    """A stored plan starting at the current step: states (H+1, nz), controls (H, nu); age in calls; source: the plan
+    as it was made (states, controls), from which a shift by less than a plan step is taken (None: this one)."""
 
     states: np.ndarray
     controls: np.ndarray
     age: int
+    source: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def check_state_goal(state: np.ndarray, goal: np.ndarray, state_dim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -132,7 +134,8 @@ class MPCPlanner:
                                                           self.dims.state_dim, self.config.dt_s)
         if self._plan is not None:
             shifted = self._shift(self._plan)
-            self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
+            reuse_s = self.config.max_plan_reuse_steps * self.config.dt_s
+            self._plan = shifted if shifted.age * self._period() <= reuse_s + 1e-9 else None
         routed = time.perf_counter()
         subgoal = goal
         try:
@@ -339,8 +342,17 @@ class MPCPlanner:
             self._mapped[n] = (self.ocp.slack_fn.map(n), self.ocp.cost_fn.map(n))
         return self._mapped[n]
 
+    def _period(self) -> float:
+        """Time between plan() calls, s (`MPCConfig.call_period_s`, else one plan step)."""
+        return self.config.dt_s if self.config.call_period_s is None else self.config.call_period_s
+
     def _shift(self, plan: _Plan) -> _Plan:
-        """Advance a stored plan by one step: drop its first stage and repeat the last control."""
+        """Advance a stored plan by one call (`_period`): by a whole plan step, drop its first stage and repeat the last
+        control; by less, the plan as it was made is seen that much later along its own motion (`shift_plan`)."""
+        if self._period() != self.config.dt_s:
+            source = plan.source or (plan.states, plan.controls)
+            states, controls = shift_plan(*source, (plan.age + 1) * self._period(), self.config)
+            return _Plan(states, controls, plan.age + 1, source)
         last = step_numpy(plan.states[-1], plan.controls[-1], self.config.dt_s, self.config.robot.model)
         states = np.vstack([plan.states[1:], last])
         controls = np.vstack([plan.controls[1:], plan.controls[-1:]])
@@ -361,3 +373,17 @@ class MPCPlanner:
         controls = np.array(controls)
         return PlanResult(controls[0].copy(), np.array(states), controls, status, solver_status, elapsed,
                           iters, float(max_slack), kind)
+
+
+def shift_plan(states: np.ndarray, controls: np.ndarray, by_s: float, cfg: MPCConfig) -> tuple[np.ndarray, np.ndarray]:
+    """A plan (states (H+1, nz) at 0, dt, .., H dt; controls (H, nu), each held dt) seen by_s s later: the states at
+    by_s + k dt (each the stage before it advanced along its own control, `step_numpy`; past the end, the last control
+    held) and the controls in force at those times."""
+    dt, h = cfg.dt_s, len(controls)
+    times = by_s + dt * np.arange(h + 1)
+    stage = np.minimum(np.floor(times / dt + 1e-9).astype(int), h)
+    frac = np.maximum(times - stage * dt, 0.0)
+    held = controls[np.minimum(stage, h - 1)]
+    out = np.array([states[i] if f == 0.0 else step_numpy(states[i], held[k], float(f), cfg.robot.model)
+                    for k, (i, f) in enumerate(zip(stage, frac, strict=True))])
+    return out, held[:h].copy()
