@@ -28,16 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planner import (
-    CROWD_MPC,
-    ForesightConfig,
-    GuidanceConfig,
-    MPCConfig,
-    MPCPlanner,
-    PedPrediction,
-    SamplingConfig,
-    step_robot,
-)
+from planner import CROWD_MPC, ForesightConfig, GuidanceConfig, MPCConfig, MPCPlanner, PedPrediction, step_robot
 
 HALL_M = np.array([[-2.0, -5.0], [14.0, 5.0]])  # lower-left, upper-right corners
 GOALS = np.array([[0.0, 0.0], [12.0, 0.0]])
@@ -176,11 +167,10 @@ def crowd_comparison(steps: int, seed: int) -> None:
               f"| {a['collisions']} / {b['collisions']} |", flush=True)
 
 
-LAYERS = {  # --guidance / --foresight / --sampling: CROWD_MPC against itself with the opt-in layer, side by side
+LAYERS = {  # --guidance / --foresight: CROWD_MPC against itself with the opt-in layer, side by side
     "guidance": {"+ guidance, 1 path": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=1)),
                  "+ guidance, 2 paths": replace(CROWD_MPC, guidance=GuidanceConfig(n_paths=2))},
     "foresight": {"+ foresight": replace(CROWD_MPC, foresight=ForesightConfig())},
-    "sampling": {"+ sampling arbiter": replace(CROWD_MPC, sampling=SamplingConfig())},
 }
 
 
@@ -209,7 +199,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--crowd", action="store_true", help="only the CROWD_MPC max_peds 8 vs 12 comparison")
     parser.add_argument("--guidance", action="store_true", help="only CROWD_MPC without / with the guidance layer")
     parser.add_argument("--foresight", action="store_true", help="only CROWD_MPC without / with the foresight search")
-    parser.add_argument("--sampling", action="store_true", help="only CROWD_MPC without / with the sampling arbiter")
     args = parser.parse_args(argv)
     steps = 40 if args.quick else args.steps
     for layer in LAYERS:

@@ -21,7 +21,7 @@ from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
 from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
-from planner import CostWeights, ForesightConfig, GuidanceConfig, RouteConfig, SamplingConfig
+from planner import CostWeights, ForesightConfig, GuidanceConfig, RouteConfig
 
 if TYPE_CHECKING:
     from envs.evaluation.suite import Suite
@@ -138,7 +138,7 @@ def add_policy_options(p: argparse.ArgumentParser, required: bool = True) -> Non
     p.add_argument("--mpc", action="append", default=[], metavar="FIELD=VALUE",
                    help="override an MPCConfig field of the MPC policies (repeatable), e.g. safety_margin_m=0.4; on "
                    "top of the benchmark suite's planner defaults, if it has any (crowdnav suites lists them); a "
-                   "nested config (route, guidance, foresight, sampling) takes none or default, or one field as "
+                   "nested config (route, guidance, foresight) takes none or default, or one field as "
                    "NESTED.FIELD=VALUE, e.g. foresight.horizon_s=6; the cost weights one field at a time, e.g. "
                    "weights.social=0.2")
 
@@ -172,7 +172,7 @@ def _mpc_overrides(items: list[str]) -> dict[str, Any]:
 
 
 NESTED = {"route": RouteConfig, "guidance": GuidanceConfig,  # --mpc FIELD=default gives these configs
-          "foresight": ForesightConfig, "sampling": SamplingConfig}
+          "foresight": ForesightConfig}
 # nested configs set one field at a time only (NESTED.FIELD=VALUE), on top of the env's MPC: the cost weights
 FIELDS_ONLY = {"weights": CostWeights}
 
@@ -196,8 +196,8 @@ def _nested_override(item: str, key: str, text: str, out: dict[str, Any]) -> dic
 
 def _mpc_value(item: str, key: str, text: str, optional: bool) -> Any:
     """The value of one --mpc FIELD=VALUE: a scalar of the field's type, `none` for an optional field, and for
-    the nested configs (`NESTED`: `route`, `guidance`, `foresight`, `sampling`) one of none (e.g. no global route) or
-    default (e.g. `planner.RouteConfig()`)."""
+    the nested configs (`NESTED`: `route`, `guidance`, `foresight`) one of none (e.g. no global route) or default (e.g.
+    `planner.RouteConfig()`)."""
     if optional and text.lower() == "none":
         return None
     if key in NESTED:

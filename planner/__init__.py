@@ -31,7 +31,6 @@ from planner.config import (
     MPCConfig,
     RobotConfig,
     RouteConfig,
-    SamplingConfig,
 )
 from planner.dynamics import brake_control, clip_control, model_dims, robot_dynamics, rollout, step_robot
 from planner.mpc import MPCPlanner
@@ -65,7 +64,6 @@ __all__ = [
     "RobotConfig",
     "RouteConfig",
     "Router",
-    "SamplingConfig",
     "SocialForcePlanner",
     "brake_control",
     "clip_control",

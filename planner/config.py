@@ -168,46 +168,6 @@ class ForesightConfig:
 
 
 @dataclass(frozen=True)
-class SamplingConfig:
-    """Settings of the sampling arbiter (planner/sampling.py): a few hundred rolled-out candidate plans, the MPC's
-    among them, scored against every predicted sample over a longer view; metres, seconds. Costs are in seconds of
-    arrival time (a contact costs `contact_cost_s`)."""
-
-    horizon_s: float = 6.0  # the view; predictions shorter than this are extended at each sample's last velocity
-    n_speeds: int = 5  # first-phase forward speeds, 0 .. top speed (unicycle) / speed magnitudes (holonomic)
-    n_turns: int = 9  # first-phase yaw rates (unicycle) / directions (holonomic: 2 * n_turns)
-    first_steps: tuple[int, ...] = (2, 4, 6)  # first-phase lengths in plan steps (dt_s each), then head for the goal
-    tail_speeds: tuple[float, ...] = (1.0, 0.5)  # second-phase speeds, fractions of the top speed
-    margin_m: float = 0.15  # clearance beyond contact below which a sample's person counts as too near
-    group_margin_m: float = 0.3  # the same for a predicted group's region (capsule round its members)
-    contact_cost_s: float = 20.0  # cost of a contact with one future, discounted by its time (tau_s)
-    shortfall_cost_sps: float = 10.0  # per metre of shortfall below a margin, per second, discounted
-    tau_s: float = 3.0  # time constant of the discount on later risk
-    cv_weight: float = 0.25  # share of the risk given to the constant-velocity future (when the prediction has history)
-    plan_risk_s: float = 1.0  # the MPC's plan is kept while its risk cost is at most this (no other is considered)
-    keep_plan_s: float = 0.5  # otherwise it still wins unless another candidate is this much cheaper
-    n_options: int = 3  # the next-best candidates (distinct first commands) handed to the safety shield
-
-    def __post_init__(self) -> None:
-        _check_positive(self, ("horizon_s", "n_speeds", "n_turns", "contact_cost_s", "tau_s"))
-        _check_non_negative(self, ("margin_m", "group_margin_m", "shortfall_cost_sps", "plan_risk_s", "keep_plan_s",
-                                   "n_options"))
-        if not 0.0 <= self.cv_weight <= 1.0:
-            raise ValueError(f"SamplingConfig.cv_weight must be in [0, 1], got {self.cv_weight!r}")
-        for name in ("horizon_s", "margin_m", "group_margin_m", "contact_cost_s", "shortfall_cost_sps", "tau_s",
-                     "plan_risk_s", "keep_plan_s"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"SamplingConfig.{name} must be finite, got {getattr(self, name)!r}")
-        if self.n_speeds < 2 or self.n_turns < 1:
-            raise ValueError(f"SamplingConfig needs n_speeds >= 2 and n_turns >= 1, got {self.n_speeds}, "
-                             f"{self.n_turns}")
-        if not self.first_steps or not all(isinstance(k, int) and k >= 1 for k in self.first_steps):
-            raise ValueError(f"SamplingConfig.first_steps must be integers >= 1, got {self.first_steps!r}")
-        if not self.tail_speeds or not all(0.0 < v <= 1.0 for v in self.tail_speeds):
-            raise ValueError(f"SamplingConfig.tail_speeds must be in (0, 1], got {self.tail_speeds!r}")
-
-
-@dataclass(frozen=True)
 class MPCConfig:
     """Sizes, timing and solver choice of the MPC. Sizes are fixed when the problem is built."""
 
@@ -234,10 +194,6 @@ class MPCConfig:
     # inf (default) trusts the soft constraints. Starts in collision are always rejected.
     max_slack_m: float = float("inf")
     max_plan_reuse_steps: int = 3  # how many steps a previous plan may be replayed in fallback
-    # time between plan() calls, s: the stored plan (warm start and fallback) is advanced by this much per call, along
-    # its own motion; None: dt_s, one whole plan step per call (before 2026-11-29 always, though the env's policies
-    # call every 0.1 s: their warm start ran 0.3 s ahead of the robot)
-    call_period_s: float | None = None
     # Passing options: solve from the n_starts cheapest distinct initial guesses (the shifted plan and the go-to-goal
     # rollouts at HEADING_OFFSETS_RAD, which pass people on different sides) and keep the solved plan of lowest
     # cost; 1 (default) = one solve from the cheapest guess, the MPC before 2026-11-28. Costs up to n_starts solves.
@@ -263,8 +219,6 @@ class MPCConfig:
     guidance: GuidanceConfig | None = None
     # -- foresight search (planner/foresight.py); None (default): off ----------------------------------------------
     foresight: ForesightConfig | None = None
-    # -- sampling arbiter (planner/sampling.py); None (default): the MPC's plan is applied as solved ----------------
-    sampling: SamplingConfig | None = None
 
     @property
     def wall_clearance_m(self) -> float:
@@ -278,9 +232,6 @@ class MPCConfig:
                                "max_group_span_m", "time_budget_s", "max_iter", "tolerance"))
         if self.wall_margin_m is not None:
             _check_non_negative(self, ("wall_margin_m",))
-        if self.call_period_s is not None and not (math.isfinite(self.call_period_s) and
-                                                   0.0 < self.call_period_s <= self.dt_s):
-            raise ValueError(f"MPCConfig.call_period_s must be in (0, dt_s], got {self.call_period_s!r}")
         _check_non_negative(self, ("max_groups", "max_walls", "safety_margin_m", "max_slack_m",
                                    "max_plan_reuse_steps"))
         _check_non_negative(self, ("clearance_growth_mps", "spread_inflation", "max_clearance_inflation_m"))

@@ -27,7 +27,6 @@ from planner.ocp import OCP, build_ocp, pack_params, param_slices
 from planner.prediction import PedPrediction, current_positions, empty_prediction, validate_prediction
 from planner.result import PlanResult, PlanStats
 from planner.route import Router
-from planner.sampling import arbitrate, make_candidates
 from planner.scene import FAR_M, SceneArrays, build_scene, validate_obstacles
 from planner.shield import shield_control
 
@@ -53,13 +52,11 @@ class _Try:
 
 @dataclass(frozen=True)
 class _Plan:
-    """A stored plan starting at the current step: states (H+1, nz), controls (H, nu); age in calls; source: the plan
-    as it was made (states, controls), from which a shift by less than a plan step is taken (None: this one)."""
+    """A stored plan starting at the current step: states (H+1, nz), controls (H, nu); age in steps."""
 
     states: np.ndarray
     controls: np.ndarray
     age: int
-    source: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def check_state_goal(state: np.ndarray, goal: np.ndarray, state_dim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -134,10 +131,8 @@ class MPCPlanner:
                                                           self.dims.state_dim, self.config.dt_s)
         if self._plan is not None:
             shifted = self._shift(self._plan)
-            reuse_s = self.config.max_plan_reuse_steps * self.config.dt_s
-            self._plan = shifted if shifted.age * self._period() <= reuse_s + 1e-9 else None
+            self._plan = shifted if shifted.age <= self.config.max_plan_reuse_steps else None
         routed = time.perf_counter()
-        subgoal = goal
         try:
             subgoal = self._subgoal(state, goal, prediction, obstacles)
             routed = time.perf_counter() - routed
@@ -145,8 +140,6 @@ class MPCPlanner:
             result = replace(result, solve_time_s=result.solve_time_s + routed, subgoal=subgoal)
         except Exception as exc:  # never raise inside the control loop
             result = self._fallback(state, "solver_error", f"{type(exc).__name__}: {exc}", 0.0, 0, np.inf)
-        if self.config.sampling is not None:
-            result = self._arbitrate(result, state, subgoal, goal, prediction, obstacles)
         if self.config.shield_horizon_s > 0:
             result = self._shield(result, state, prediction, obstacles)
         result = replace(result, plan_time_s=time.perf_counter() - called)
@@ -164,34 +157,11 @@ class MPCPlanner:
             subgoal = self.foresight.subgoal(state[:2], subgoal, prediction, obstacles, goal)
         return subgoal
 
-    def _arbitrate(self, result: PlanResult, state: np.ndarray, subgoal: np.ndarray, goal: np.ndarray,
-                   prediction: PedPrediction, obstacles: np.ndarray | None) -> PlanResult:
-        """``result`` or, where the sampling arbiter (planner/sampling.py) finds a clearly cheaper candidate, that
-        candidate's plan (stored as the next warm start); the next-best candidates become the shield's passing
-        options. Its wall time is added to ``solve_time_s``; an error keeps ``result`` (never raises)."""
-        start, h = time.perf_counter(), self.config.horizon_steps
-        try:
-            cands = make_candidates(state, subgoal, result.controls, self.config)
-            ends = cands.states[:, -1, :2]
-            togo = self.router.cost_to_go(ends, goal) if self.router is not None else \
-                np.linalg.norm(ends - goal, axis=1)
-            verdict = arbitrate(cands, togo, prediction, obstacles, self.config)
-        except Exception:  # the MPC's own answer stands
-            return result
-        self._options = [(cands.states[i, : h + 1], cands.controls[i, :h], None) for i in verdict.options]
-        elapsed = time.perf_counter() - start
-        if verdict.chosen == 0:
-            return replace(result, solve_time_s=result.solve_time_s + elapsed)
-        states, controls = cands.states[verdict.chosen, : h + 1], cands.controls[verdict.chosen, :h]
-        self._plan = _Plan(states, controls, 0)
-        return replace(result, control=controls[0].copy(), states=states, controls=controls, arbitrated=True,
-                       solve_time_s=result.solve_time_s + elapsed)
-
     def _shield(self, result: PlanResult, state, prediction, obstacles) -> PlanResult:
         """``result`` with its first control checked by the safety shield (planner/shield.py); the shield's
         wall time is added to ``solve_time_s``. A shield error keeps the plan's control (never raises)."""
         start = time.perf_counter()
-        options = self._options if result.status == "solved" or self.config.sampling is not None else []
+        options = self._options if result.status == "solved" else []
         try:
             verdict = shield_control(state, result.controls, prediction, obstacles, self.config,
                                      np.array([controls for _, controls, _ in options]) if options else None)
@@ -342,17 +312,8 @@ class MPCPlanner:
             self._mapped[n] = (self.ocp.slack_fn.map(n), self.ocp.cost_fn.map(n))
         return self._mapped[n]
 
-    def _period(self) -> float:
-        """Time between plan() calls, s (`MPCConfig.call_period_s`, else one plan step)."""
-        return self.config.dt_s if self.config.call_period_s is None else self.config.call_period_s
-
     def _shift(self, plan: _Plan) -> _Plan:
-        """Advance a stored plan by one call (`_period`): by a whole plan step, drop its first stage and repeat the last
-        control; by less, the plan as it was made is seen that much later along its own motion (`shift_plan`)."""
-        if self._period() != self.config.dt_s:
-            source = plan.source or (plan.states, plan.controls)
-            states, controls = shift_plan(*source, (plan.age + 1) * self._period(), self.config)
-            return _Plan(states, controls, plan.age + 1, source)
+        """Advance a stored plan by one step: drop its first stage and repeat the last control."""
         last = step_numpy(plan.states[-1], plan.controls[-1], self.config.dt_s, self.config.robot.model)
         states = np.vstack([plan.states[1:], last])
         controls = np.vstack([plan.controls[1:], plan.controls[-1:]])
@@ -373,17 +334,3 @@ class MPCPlanner:
         controls = np.array(controls)
         return PlanResult(controls[0].copy(), np.array(states), controls, status, solver_status, elapsed,
                           iters, float(max_slack), kind)
-
-
-def shift_plan(states: np.ndarray, controls: np.ndarray, by_s: float, cfg: MPCConfig) -> tuple[np.ndarray, np.ndarray]:
-    """A plan (states (H+1, nz) at 0, dt, .., H dt; controls (H, nu), each held dt) seen by_s s later: the states at
-    by_s + k dt (each the stage before it advanced along its own control, `step_numpy`; past the end, the last control
-    held) and the controls in force at those times."""
-    dt, h = cfg.dt_s, len(controls)
-    times = by_s + dt * np.arange(h + 1)
-    stage = np.minimum(np.floor(times / dt + 1e-9).astype(int), h)
-    frac = np.maximum(times - stage * dt, 0.0)
-    held = controls[np.minimum(stage, h - 1)]
-    out = np.array([states[i] if f == 0.0 else step_numpy(states[i], held[k], float(f), cfg.robot.model)
-                    for k, (i, f) in enumerate(zip(stage, frac, strict=True))])
-    return out, held[:h].copy()

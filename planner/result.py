@@ -35,7 +35,6 @@ class PlanResult:
     None when no solve ran.
     options: with guidance (``MPCConfig.guidance``), the planned states (H+1, state_dim) of every solved passing
     option, the chosen one first (planner/guidance.py); empty otherwise.
-    arbitrated: True when the sampling arbiter (``MPCConfig.sampling``, planner/sampling.py) replaced the MPC's plan.
     """
 
     control: np.ndarray
@@ -52,7 +51,6 @@ class PlanResult:
     subgoal: np.ndarray | None = None
     plan_time_s: float = 0.0
     options: tuple[np.ndarray, ...] = ()
-    arbitrated: bool = False
 
     @property
     def fallback_used(self) -> bool:
@@ -77,8 +75,6 @@ class PlanStats:
             self.counts[f"fallback_{result.fallback}"] += 1
         if result.shielded:
             self.counts["shielded"] += 1
-        if result.arbitrated:
-            self.counts["arbitrated"] += 1
         if result.iterations > 0 or result.solve_time_s > 0:
             self.solve_times_s.append(result.plan_time_s)
 

@@ -224,18 +224,6 @@ class Router:
             near = self._nearest(position)
         return self._carrot(position, near, walls)
 
-    def cost_to_go(self, points: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """The way left (P,) m from points (P, 2) m to goal (2,) m: along the last route when it leads to this goal
-        (the distance to its nearest point plus the path beyond that point: never a short cut through a wall), else
-        the straight distance."""
-        points, goal = np.asarray(points, float), np.asarray(goal, float)
-        straight = np.linalg.norm(points - goal, axis=-1)
-        if self._path is None or self._arc is None or self._key is None or self._key[0] != goal.tobytes():
-            return straight
-        gap = np.linalg.norm(points[:, None] - self._path[None], axis=-1)  # (P, V)
-        near = np.argmin(gap, axis=1)
-        return gap[np.arange(len(points)), near] + self._arc[-1] - self._arc[near]
-
     def _nearest(self, position: np.ndarray) -> int | None:
         if self._path is None:
             return None

@@ -10,7 +10,7 @@ tuning suite see `crowdnav benchmark --suite crowdnav-tune` and `scripts/compare
 A variant is ``NAME`` or ``NAME:field=value,field=value`` where the fields are `MPCConfig` fields applied on top
 of the base settings (``--base env``: the env's `ENV_MPC`; ``--base crowd``: `planner.CROWD_MPC`), e.g.
 ``--variant base --variant wide:safety_margin_m=0.4,shield_margin_m=0.2``; a nested config's defaults as
-``sampling=default``. ``weights.<name>=value``
+``foresight=default``. ``weights.<name>=value``
 sets a cost weight. Tune only on recordings that are not reported (the defaults: crowds_zara03, uni_examples).
 Both are sparse (median 3-6 people per frame against 34-49 in the univ test scene); ``--overlay K`` superimposes
 K time-shifted copies of each for a dense tuning crowd (the env's ``ReplayConfig.overlay``; before 2026-11-27
@@ -71,7 +71,7 @@ def build_mpc_config(robot, overrides: dict, base: str):
         raise ValueError(f"unknown MPCConfig fields {sorted(unknown)}")
     from envs.cli_options import NESTED
 
-    top = {k: NESTED[k]() if k in NESTED and v == "default" else v for k, v in top.items()}  # e.g. sampling=default
+    top = {k: NESTED[k]() if k in NESTED and v == "default" else v for k, v in top.items()}  # e.g. foresight=default
     return replace(cfg, robot=robot, weights=replace(cfg.weights, **weights), **top)
 
 

@@ -55,8 +55,7 @@ def artifact_digest(cfg: PolicyConfig) -> str | None:
 # MPCConfig fields added after records existed, with their defaults: left out of the fingerprint while at the
 # default, so that records made before a field existed still match a config that does not use it
 # ("spacetime", removed, was None in all)
-LATER_MPC_FIELDS: dict[str, Any] = {"n_starts": 1, "guidance": None, "foresight": None, "sampling": None,
-                                    "call_period_s": None}
+LATER_MPC_FIELDS: dict[str, Any] = {"n_starts": 1, "guidance": None, "foresight": None}
 # MPCConfig fields removed after records existed (layers tried and not adopted, docs/decisions/planner-settings.md,
 # "Removed layers"), with the JSON value each had at its default (every record's: they were off in every suite): put
 # back into the fingerprinted config, so that the fingerprints of records made while they existed do not change

@@ -264,9 +264,7 @@ def oracle_prediction(view: PolicyView) -> PedPrediction:
 
 def oracle_future_s(config: MPCConfig) -> float:
     """How far ahead (s) an oracle policy reads the true future: the MPC's whole horizon, however long (--mpc), and
-    the foresight search's view where that is longer (not the sampling arbiter's: it extends what it is given at each
-    future's last velocity, as it does GP-Graph's 4.8 s, and simulating 6 s ahead every step would double the
-    oracle's cost)."""
+    the foresight search's view where that is longer."""
     horizon = config.horizon_steps * config.dt_s
     return horizon if config.foresight is None else max(horizon, config.foresight.horizon_s)
 

@@ -298,12 +298,6 @@ def test_a_nested_config_field_is_set_by_its_dotted_name():
         parse("foresigt.horizon_s=6")
     with pytest.raises(ValueError, match="is not a float"):
         parse("foresight.horizon_s=far")
-    from planner import SamplingConfig
-
-    assert parse("sampling=default").sampling == SamplingConfig() and parse().sampling is None
-    assert parse("sampling.contact_cost_s=40").sampling == SamplingConfig(contact_cost_s=40.0)
-    with pytest.raises(ValueError, match="did you mean"):
-        parse("sampling.contact_cost=40")
     assert parse("foresight.retry_without_margin=0").foresight.retry_without_margin is False  # as FIELD=VALUE reads
     with pytest.raises(ValueError, match="is not a bool"):
         parse("foresight.retry_without_margin=maybe")

@@ -175,9 +175,6 @@ def test_the_oracles_read_as_far_as_the_foresight_search_looks():
     seeing = replace(ENV_MPC, foresight=ForesightConfig(horizon_s=10.0))
     assert oracle_future_s(ENV_MPC) == pytest.approx(4.0) and oracle_future_s(seeing) == pytest.approx(10.0)
     assert oracle_future_s(replace(seeing, horizon_steps=30)) == pytest.approx(12.0)  # the longer of the two
-    from planner import SamplingConfig
-
-    assert oracle_future_s(replace(ENV_MPC, sampling=SamplingConfig(horizon_s=7.0))) == pytest.approx(4.0)
     env = CrowdNavEnv(CrowdNavConfig(scenario="corridor", n_pedestrians=10, robot_visible=False))
     env.reset(seed=2)
     assert make_policy(PolicyConfig("mpc-oracle", mpc=seeing), env).future_s == pytest.approx(10.0)

@@ -6,7 +6,6 @@ import dataclasses
 
 import casadi as ca
 import numpy as np
-import pytest
 from planner_helpers import PRED, STEP_S, make_config
 
 from planner import MPCConfig, MPCPlanner, PedPrediction, brake_control, clip_control, frozen_prediction
@@ -103,35 +102,3 @@ def test_random_scenes_never_raise_and_respect_bounds():
         assert abs(result.control[1]) <= robot.max_yaw_rate_radps + 1e-6
         assert abs(result.control[0] - state[3]) <= robot.max_accel_mps2 * planner.config.dt_s + 1e-6
     assert planner.stats.counts["calls"] == 25
-
-
-def test_a_plan_called_every_tenth_of_a_second_is_advanced_a_tenth_of_a_second():
-    """With call_period_s = 0.1 the stored plan moves 0.1 s along its own motion per call (four calls = one plan
-    step), the fallback replays the control in force at that time, and a plan is reused for the same time as before
-    (max_plan_reuse_steps plan steps: 2 x 0.4 s = 8 calls)."""
-    from planner.dynamics import step_numpy
-    from planner.mpc import shift_plan
-
-    cfg = make_config(call_period_s=0.1, max_plan_reuse_steps=2)
-    controls = np.array([[0.4 * (k + 1), 0.3 * (-1) ** k] for k in range(cfg.horizon_steps)])
-    states = [np.zeros(5)]
-    for u in controls:
-        states.append(step_numpy(states[-1], u, cfg.dt_s, "unicycle"))
-    states = np.array(states)
-    moved, held = shift_plan(states, controls, 0.1, cfg)
-    assert np.array_equal(held[:3], controls[:3]) and np.allclose(moved[1], step_numpy(states[1], controls[1], 0.1))
-    four, four_held = shift_plan(states, controls, 0.4, cfg)  # a whole plan step: the old shift
-    assert np.allclose(four[:-1], states[1:]) and np.array_equal(four_held, np.vstack([controls[1:], controls[-1:]]))
-    planner = MPCPlanner(cfg)
-    good = planner.plan(np.zeros(5), GOAL, None)
-    _break_solver(planner, "raise")
-    kinds = []
-    for call in range(1, 10):
-        result = planner.plan(np.zeros(5), GOAL, None)
-        kinds.append(result.fallback)
-        if result.fallback == "previous_plan":
-            in_force = good.controls[int(call * 0.1 / cfg.dt_s + 1e-9)]
-            assert np.allclose(result.control, clip_control(np.zeros(5), in_force, cfg.dt_s, cfg.robot))
-    assert kinds == ["previous_plan"] * 8 + ["brake"]
-    with pytest.raises(ValueError, match="call_period_s"):
-        MPCConfig(call_period_s=0.5)
