@@ -18,6 +18,7 @@ if TYPE_CHECKING:
 
 WARM_STARTS = ("none", "bc", "dagger")
 LAGRANGE_FIELDS = ("cost_budget", "lambda_lr", "lambda_init")  # the multiplier's settings (constrained PPO only)
+COST_SOURCES = ("rollout", "evaluation")  # what the multiplier is stepped on (envs.rl.lagrangian)
 # The env settings of a run without a suite (None in TrainConfig: not given). With a suite they come from its cell,
 # and giving any of them is an error.
 SCENARIO_DEFAULTS: dict[str, Any] = {"scenario": "circle_crossing", "pedestrians": 5, "invisible": True,
@@ -86,6 +87,9 @@ class TrainConfig:
     cost_budget: float | None = None  # mean episode cost allowed (cost units per episode); needed with constraint
     lambda_lr: float = 0.05           # multiplier step per rollout per cost unit of excess (J_c - budget)
     lambda_init: float = 0.0          # the multiplier at step 0 (reward units per cost unit)
+    # the episode cost the multiplier is stepped on: "rollout", the exploring policy's episodes after each rollout;
+    # "evaluation", the deterministic policy's evaluation episodes after each evaluation (the collision term only)
+    cost_source: str = "rollout"
 
     def __post_init__(self) -> None:
         self._resolve_env_fields()
@@ -146,13 +150,18 @@ class TrainConfig:
 
         check_constraint(self.constraint)
         defaults = {f.name: f.default for f in dataclasses.fields(self) if f.name in LAGRANGE_FIELDS}
+        if self.cost_source not in COST_SOURCES:
+            raise ValueError(f"unknown cost_source {self.cost_source!r}; valid: {', '.join(COST_SOURCES)}")
         if not self.constraint:
             given = [f"--{k.replace('_', '-')}" for k, v in defaults.items() if getattr(self, k) != v]
+            given += ["--cost-source"] if self.cost_source != "rollout" else []
             if given:
                 raise ValueError(f"{', '.join(given)} only apply to constrained PPO; add --constraint TERM=WEIGHT")
             return
         if self.cost_budget is None:
             raise ValueError("constrained PPO needs a cost budget (--cost-budget, mean cost per episode)")
+        if self.cost_source == "evaluation" and [t for t, _ in self.constraint] != ["collision"]:
+            raise ValueError("--cost-source evaluation measures collisions only: use --constraint collision=WEIGHT")
         for name in LAGRANGE_FIELDS:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):

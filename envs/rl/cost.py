@@ -135,3 +135,8 @@ def add_constraint_arguments(p: argparse.ArgumentParser, defaults: Any) -> None:
     for name, text in flags.items():
         p.add_argument("--" + name.replace("_", "-"), type=float, default=argparse.SUPPRESS, dest=name,
                        help=f"{text} (default: {getattr(defaults, name)})")
+    p.add_argument("--cost-source", choices=("rollout", "evaluation"), default=argparse.SUPPRESS, dest="cost_source",
+                   help="constrained PPO: the episode cost the multiplier steps on: the exploring policy's after each "
+                        "rollout, or the deterministic policy's collision rate after each evaluation (every "
+                        "--eval-every-steps; --lambda-lr then steps once per evaluation) "
+                        f"(default: {defaults.cost_source})")

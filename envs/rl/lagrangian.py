@@ -10,7 +10,10 @@ Exploration in Deep Reinforcement Learning"): maximise the return while the mean
   rollout's end and at time-outs, as SB3 does for the reward.
 - Multiplier: after each rollout, lambda <- max(0, lambda + lambda_lr x (J_c - budget)) (`next_multiplier`), J_c the
   mean cost of the rollout's finished episodes (when none finished: of the last `stats_window_size`, 100, finished
-  episodes; before the first one, lambda stays).
+  episodes; before the first one, lambda stays). With `cost_source="evaluation"` the rollouts leave lambda alone and
+  each evaluation of the deterministic policy steps it instead (`observe_evaluation_cost`, called by the training
+  monitor with the evaluation's collision rate times the weight): the exploring policy's noise collides, and its J_c
+  stays over any budget the deployed, deterministic policy meets.
 - Policy loss: PPO's clipped surrogate on the advantage (A_r - lambda A_c) / (1 + lambda) (`combined_advantage`),
   which SB3's PPO then normalises per minibatch as it does A_r: so lambda weighs one cost unit against reward
   units, and the update moves towards lower cost only as lambda grows. With lambda = 0 the update is PPO's, bit for
@@ -133,17 +136,21 @@ class CostRolloutBuffer(DictRolloutBuffer):
 class PPOLagrangian(PPO):
     """SB3's PPO under a cost budget (module docstring). `cost_budget`: the mean episode cost allowed (cost units
     per episode, >= 0); `lambda_lr`: the multiplier's step per rollout per cost unit of excess (> 0);
-    `lambda_init`: the multiplier at the start (>= 0). The envs must report `info["episode_cost"]`
+    `lambda_init`: the multiplier at the start (>= 0); `cost_source`: "rollout" (each rollout's J_c steps the
+    multiplier) or "evaluation" (`observe_evaluation_cost` does). The envs must report `info["episode_cost"]`
     (`envs.rl.cost.wrap_for_cost`); Box actions, no state-dependent exploration."""
 
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MultiInputPolicy": CostActorCriticPolicy}
 
     def __init__(self, policy: Any, env: Any, cost_budget: float = 0.0, lambda_lr: float = 0.05,
-                 lambda_init: float = 0.0, **kwargs: Any) -> None:
+                 lambda_init: float = 0.0, cost_source: str = "rollout", **kwargs: Any) -> None:
         for name, value, low_ok in (("cost_budget", cost_budget, True), ("lambda_lr", lambda_lr, False),
                                     ("lambda_init", lambda_init, True)):
             if not (math.isfinite(value) and (value >= 0 if low_ok else value > 0)):
                 raise ValueError(f"{name} must be finite and {'>=' if low_ok else '>'} 0, got {value}")
+        if cost_source not in ("rollout", "evaluation"):
+            raise ValueError(f"unknown cost_source {cost_source!r}; valid: rollout, evaluation")
+        self.cost_source = cost_source
         if kwargs.get("use_sde"):
             raise ValueError("PPOLagrangian does not support state-dependent exploration (use_sde)")
         self.cost_budget, self.lambda_lr = float(cost_budget), float(lambda_lr)
@@ -179,6 +186,13 @@ class PPOLagrangian(PPO):
         self.episode_cost = None if state.get("episode_cost") is None else float(state["episode_cost"])
         self.recent_episode_costs.clear()
         self.recent_episode_costs.extend(float(c) for c in state.get("recent_episode_costs", []))
+
+    def observe_evaluation_cost(self, episode_cost: float) -> None:
+        """Step the multiplier on the mean episode cost of an evaluation of the deterministic policy (with
+        `cost_source="evaluation"`; ignored otherwise)."""
+        if self.cost_source == "evaluation" and math.isfinite(episode_cost):
+            self.lagrange_multiplier = next_multiplier(self.lagrange_multiplier, float(episode_cost), self.cost_budget,
+                                                       self.lambda_lr)
 
     def _measure_episode_cost(self, finished: list[float]) -> None:
         """J_c after a rollout: the mean cost of its finished episodes, else of the last finished ones."""
@@ -244,7 +258,7 @@ class PPOLagrangian(PPO):
     def train(self) -> None:
         """Update the multiplier from the rollout's episode cost, PPO's update on the combined advantage, then fit
         the cost critic."""
-        if self.episode_cost is not None:
+        if self.episode_cost is not None and self.cost_source == "rollout":
             self.lagrange_multiplier = next_multiplier(self.lagrange_multiplier, self.episode_cost, self.cost_budget,
                                                        self.lambda_lr)
         buffer = self.rollout_buffer

@@ -168,6 +168,10 @@ class TrainMonitor(BaseCallback):
         print(f"eval @ {row['steps']}: success {row['success']:.2f}  collision {row['collision']:.2f}  "
               f"timeout {row['timeout']:.2f}  return {row['mean_return']:.2f}  ({self.cfg.eval_episodes} episodes, "
               f"seeds {seeds.start}..{seeds.stop - 1})", flush=True)
+        if row["steps"] > 0 and getattr(model, "cost_source", "rollout") == "evaluation":
+            model.observe_evaluation_cost(dict(self.cfg.constraint)["collision"] * row["collision"])
+            print(f"  lagrange multiplier {model.lagrange_multiplier:.3f} (evaluation cost "
+                  f"{row['collision']:.3f} collisions per episode, budget {self.cfg.cost_budget})", flush=True)
         if row["steps"] == 0 and np.isfinite(row["mean_return"]):
             self.baseline = (float(row["success"]), float(row["mean_return"]))
         best = (self.best_success, self.best_return)

@@ -98,7 +98,7 @@ def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
     if cfg.constraint:  # PPO-Lagrangian: PPO with a cost critic and a multiplier (`envs.rl.lagrangian`)
         from envs.rl.lagrangian import PPOLagrangian
 
-        algo, constrained = PPOLagrangian, {k: getattr(cfg, k) for k in LAGRANGE_FIELDS}
+        algo, constrained = PPOLagrangian, {k: getattr(cfg, k) for k in (*LAGRANGE_FIELDS, "cost_source")}
     model = algo("MultiInputPolicy", vec_env, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                 learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
                 ent_coef=cfg.ent_coef, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs, seed=cfg.seed,

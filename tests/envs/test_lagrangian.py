@@ -216,6 +216,9 @@ def test_constraint_misuse_is_one_line_and_writes_nothing(tmp_path, capsys, argv
     assert main(["train", *argv, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1 and not out.exists()
+    with pytest.raises(SystemExit) as done:  # argparse's own one line for a name not among the choices
+        main(["train", "--constraint", "collision=1", "--cost-budget", "0.1", "--cost-source", "evals"])
+    assert done.value.code == 2 and "invalid choice" in capsys.readouterr().err
 
 
 def test_a_constraint_from_a_toml_file_and_flags(tmp_path):
@@ -311,3 +314,55 @@ def test_ctrl_c_during_an_update_saves_the_multiplier_of_the_rollouts_start(tmp_
     assert monitor.save_interrupted(model) == 0
     state = json.loads((tmp_path / "checkpoints" / "state.json").read_text())
     assert state["steps"] == 0 and state["lagrangian"]["multiplier"] == model.lagrange_multiplier == 1.0
+
+
+def test_with_the_evaluation_as_cost_source_only_evaluations_step_the_multiplier(tmp_path, capsys):
+    """--cost-source evaluation: a rollout leaves the multiplier as it is (its J_c is still logged), each evaluation
+    of the deterministic policy steps it on the weighted collision rate; a run saves the multiplier those steps
+    give from the evaluations it logged."""
+    from stable_baselines3.common.env_util import make_vec_env as sb3_vec
+
+    venv = sb3_vec(lambda: wrap_for_cost(Toll(), {"group_intrusion": 1.0}, dt_s=1.0), n_envs=4, seed=0)
+    model = PPOLagrangian("MultiInputPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu",
+                          cost_budget=0.1, lambda_lr=2.0, lambda_init=0.5, cost_source="evaluation")
+    model.learn(64)
+    assert model.episode_cost is not None and model.episode_cost > 0.1 and model.lagrange_multiplier == 0.5
+    model.observe_evaluation_cost(0.3)
+    assert model.lagrange_multiplier == pytest.approx(0.9)  # 0.2 over the budget
+    model.observe_evaluation_cost(0.0)
+    assert model.lagrange_multiplier == pytest.approx(0.7)
+    model.observe_evaluation_cost(float("nan"))  # an evaluation without episodes changes nothing
+    assert model.lagrange_multiplier == pytest.approx(0.7)
+    rollout = toll_model(0.5)
+    rollout.observe_evaluation_cost(3.0)  # the default source ignores evaluations
+    assert rollout.lagrange_multiplier == 0.5
+    with pytest.raises(ValueError, match="unknown cost_source"):
+        PPOLagrangian("MultiInputPolicy", venv, cost_budget=0.1, cost_source="eval")
+    cfg = TrainConfig(pedestrians=5, time_limit_s=4.0, total_steps=128, envs=2, n_steps=64, batch_size=64,
+                      n_epochs=2, eval_every_steps=64, eval_episodes=2, checkpoint_every_steps=64,
+                      constraint=(("collision", 2.0),), cost_budget=0.25, lambda_lr=1.5, lambda_init=0.2,
+                      cost_source="evaluation")
+    out = tmp_path / "run"
+    assert train(cfg, out) == 0
+    rows = [r for r in csv.DictReader((out / "eval.csv").open()) if int(r["steps"]) > 0]
+    assert rows and "lagrange multiplier" in capsys.readouterr().out
+    lam = 0.2
+    for r in rows:
+        lam = next_multiplier(lam, 2.0 * float(r["collision"]), 0.25, 1.5)
+    saved = json.loads((out / "checkpoints" / "state.json").read_text())["lagrangian"]["multiplier"]
+    assert saved == pytest.approx(lam)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--cost-source", "evaluation"], "--cost-source only apply to constrained PPO"),
+    (["--constraint", "group_intrusion=1", "--cost-budget", "0.1", "--cost-source", "evaluation"],
+     "measures collisions only"),
+])
+def test_cost_source_misuse_is_one_line_and_writes_nothing(tmp_path, capsys, argv, message):
+    out = tmp_path / "run"
+    assert main(["train", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and not out.exists()
+    with pytest.raises(SystemExit) as done:  # argparse's own one line for a name not among the choices
+        main(["train", "--constraint", "collision=1", "--cost-budget", "0.1", "--cost-source", "evals"])
+    assert done.value.code == 2 and "invalid choice" in capsys.readouterr().err
