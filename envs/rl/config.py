@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from envs.config import DEFAULT_PREDICTOR, CrowdNavConfig, ObservationConfig, RewardWeights
+from envs.rl.cost import COST_SOURCES
 from envs.rl.setting import TRAIN_SEED_OFFSET, check_disjoint, check_seeds, suite_env_config
 
 if TYPE_CHECKING:
@@ -18,7 +19,6 @@ if TYPE_CHECKING:
 
 WARM_STARTS = ("none", "bc", "dagger")
 LAGRANGE_FIELDS = ("cost_budget", "lambda_lr", "lambda_init")  # the multiplier's settings (constrained PPO only)
-COST_SOURCES = ("rollout", "evaluation")  # what the multiplier is stepped on (envs.rl.lagrangian)
 # The env settings of a run without a suite (None in TrainConfig: not given). With a suite they come from its cell,
 # and giving any of them is an error.
 SCENARIO_DEFAULTS: dict[str, Any] = {"scenario": "circle_crossing", "pedestrians": 5, "invisible": True,

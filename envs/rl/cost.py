@@ -32,6 +32,7 @@ from envs.rewards import comfort_depth
 
 CONSTRAINT_TERMS = ("collision", "group_intrusion", "discomfort")
 EPISODE_COST_KEY = "episode_cost"  # in the step info: the weighted cost since the episode's reset
+COST_SOURCES = ("rollout", "evaluation")  # what the multiplier is stepped on (envs.rl.lagrangian, --cost-source)
 COMFORT_M = CrowdNavConfig.discomfort_distance_m  # the env's default comfort zone, m (discomfort)
 
 
@@ -135,7 +136,7 @@ def add_constraint_arguments(p: argparse.ArgumentParser, defaults: Any) -> None:
     for name, text in flags.items():
         p.add_argument("--" + name.replace("_", "-"), type=float, default=argparse.SUPPRESS, dest=name,
                        help=f"{text} (default: {getattr(defaults, name)})")
-    p.add_argument("--cost-source", choices=("rollout", "evaluation"), default=argparse.SUPPRESS, dest="cost_source",
+    p.add_argument("--cost-source", choices=COST_SOURCES, default=argparse.SUPPRESS, dest="cost_source",
                    help="constrained PPO: the episode cost the multiplier steps on: the exploring policy's after each "
                         "rollout, or the deterministic policy's collision rate after each evaluation (every "
                         "--eval-every-steps; --lambda-lr then steps once per evaluation) "

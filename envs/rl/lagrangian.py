@@ -42,7 +42,7 @@ from stable_baselines3.common.buffers import DictRolloutBuffer
 from stable_baselines3.common.policies import BasePolicy, MultiInputActorCriticPolicy
 from stable_baselines3.common.utils import obs_as_tensor
 
-from envs.rl.cost import decision_costs, episode_costs_of
+from envs.rl.cost import COST_SOURCES, decision_costs, episode_costs_of
 
 
 # ------------------------------------------------------------------------------------------ the pieces
@@ -148,8 +148,8 @@ class PPOLagrangian(PPO):
                                     ("lambda_init", lambda_init, True)):
             if not (math.isfinite(value) and (value >= 0 if low_ok else value > 0)):
                 raise ValueError(f"{name} must be finite and {'>=' if low_ok else '>'} 0, got {value}")
-        if cost_source not in ("rollout", "evaluation"):
-            raise ValueError(f"unknown cost_source {cost_source!r}; valid: rollout, evaluation")
+        if cost_source not in COST_SOURCES:
+            raise ValueError(f"unknown cost_source {cost_source!r}; valid: {', '.join(COST_SOURCES)}")
         self.cost_source = cost_source
         if kwargs.get("use_sde"):
             raise ValueError("PPOLagrangian does not support state-dependent exploration (use_sde)")
