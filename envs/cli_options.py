@@ -153,7 +153,9 @@ def add_backend_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _mpc_overrides(items: list[str]) -> dict[str, Any]:
+def mpc_overrides(items: list[str] | tuple[str, ...]) -> dict[str, Any]:
+    """{field: value} of `--mpc FIELD=VALUE` items on top of the env's MPC (`ENV_MPC`); ValueError naming the valid
+    fields for an unknown one and the type for a malformed value."""
     valid = {f.name: f for f in fields(ENV_MPC) if f.name not in ("robot", "weights")}
     out: dict[str, Any] = {}
     for item in items:
@@ -248,7 +250,7 @@ def policy_configs(args: argparse.Namespace, suite: Suite | None = None) -> list
             raise ignored_flag(flag, args.policy, _readers(flag))
     if "--mpc" in chosen or (suite is not None and suite.mpc):
         base = suite.mpc_config(ENV_MPC) if suite is not None else ENV_MPC
-        chosen["--mpc"] = replace(base, **_mpc_overrides(args.mpc or []))
+        chosen["--mpc"] = replace(base, **mpc_overrides(args.mpc or []))
     if suite is not None and suite.replan_every_steps is not None and "--replan-every" not in chosen:
         chosen["--replan-every"] = suite.replan_every_steps
     return [PolicyConfig(name=n, **{FLAG_FIELDS[f]: v for f, v in chosen.items() if f in flags_read(n)})

@@ -189,15 +189,17 @@ def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
         raise ValueError(f"{path}: cannot load its weights ({str(exc).splitlines()[0]})") from exc
 
 
-def load_policy_weights(model: Any, path: Path, config: CrowdNavConfig, every: int) -> list[str]:
+def load_policy_weights(model: Any, path: Path, config: CrowdNavConfig, every: int,
+                        any_period: bool = False) -> list[str]:
     """The policy weights of the agent in `path` into `model`'s policy (`weights_only`), to start training from them;
-    the optimiser starts afresh. The observation layout and the decision period `every` must be the agent's, and every
+    the optimiser starts afresh. The observation layout and the decision period `every` must be the agent's (the
+    period need not with `any_period`: a warm start re-fits the policy to the run's period), and every
     saved weight must fit; weights `model` has and the agent lacks (a constrained PPO's cost critic) keep their
     initial values and are returned by name. ValueError otherwise."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
     _, layout = check_layout(path, config)
-    if decision_period(layout) != every:
+    if not any_period and decision_period(layout) != every:
         raise ValueError(f"{path}: the agent decides every {decision_period(layout)} env steps, this run every {every}")
     try:  # SB3's reader: torch.load(weights_only=True) of each .pth entry, the "data" entry not read
         _, params, _ = load_from_zip_file(path, load_data=False, device="cpu")

@@ -67,7 +67,12 @@ class TrainConfig:
     log_std_init: float = -0.5
     warm_start: str = "none"          # "bc": behaviour cloning of demo_policy before PPO; "dagger": then DAgger
     demo_policy: str = "mpc-gpgraph"
-    init_from: str = ""               # start from this agent's policy (a packaged agent's name or an SB3 .zip); "": new
+    # the demonstrating policy's MPC settings on top of the suite's (its planner, or a NAME+shield's shield), as
+    # `crowdnav benchmark --mpc` items, e.g. ("shield_horizon_s=0.5",)
+    demo_mpc: tuple[str, ...] = ()
+    # start from this agent's policy (a packaged agent's name or an SB3 .zip); "": new. With a warm start, the warm
+    # start's cloning continues from it (which may re-fit it to another decision period: distillation)
+    init_from: str = ""
     demo_episodes: int = 60
     demo_seed: int = 200_000
     demo_successes_only: bool = False  # keep only the demonstrations the expert succeeded in (not DAgger's labels)
@@ -93,7 +98,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         self._resolve_env_fields()
-        ints = ("decision_every_steps", "max_pedestrians", "total_steps", "envs", "workers", "n_steps", "batch_size",
+        ints = ("decision_every_steps", "max_pedestrians", "envs", "workers", "n_steps", "batch_size",
                 "n_epochs", "demo_episodes", "bc_epochs", "dagger_rounds", "dagger_episodes", "eval_every_steps",
                 "eval_episodes", "checkpoint_every_steps", "threads")
         for name in ints + (("dagger_epochs",) if self.dagger_epochs is not None else ()):  # unset: bc_epochs
@@ -101,11 +106,13 @@ class TrainConfig:
                 raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)!r}")
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"unknown warm_start {self.warm_start!r}; valid: {', '.join(WARM_STARTS)}")
+        self._check_total_steps()
         if self.init_from:
-            if self.warm_start != "none":
-                raise ValueError(f"init_from {self.init_from!r} starts from an agent; drop warm_start "
-                                 f"{self.warm_start}")
             self.init_path()  # names an agent that exists
+        if self.demo_mpc:
+            if self.warm_start == "none":
+                raise ValueError("demo_mpc sets the demonstrating policy's MPC; it needs warm_start bc or dagger")
+            self.demo_mpc_overrides()
         if self.workers not in (1, self.envs):
             raise ValueError(f"workers must be 1 (all envs in this process) or equal to envs ({self.envs}: one "
                              f"subprocess per env, SB3's SubprocVecEnv), got {self.workers}")
@@ -121,6 +128,26 @@ class TrainConfig:
         for what, r in seeds.items():
             check_seeds(what, r)
         check_disjoint(seeds)
+
+    def _check_total_steps(self) -> None:
+        """total_steps: an integer >= 1, or 0 (no PPO) when the policy comes from a warm start or an agent."""
+        n = self.total_steps
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ValueError(f"total_steps must be an integer >= 0, got {n!r}")
+        if n == 0 and self.warm_start == "none" and not self.init_from:
+            raise ValueError("total_steps 0 (no PPO) needs a policy to keep: a warm start or init_from")
+
+    def demo_mpc_overrides(self) -> dict[str, Any]:
+        """{MPCConfig field: value} of `demo_mpc` (`envs.cli_options.mpc_overrides`); ValueError naming the valid
+        fields."""
+        from envs.cli_options import mpc_overrides
+
+        if isinstance(self.demo_mpc, str) or not all(isinstance(x, str) for x in self.demo_mpc):
+            raise ValueError(f"demo_mpc must be a list of FIELD=VALUE strings, got {self.demo_mpc!r}")
+        try:
+            return mpc_overrides(list(self.demo_mpc))
+        except ValueError as exc:
+            raise ValueError(f"demo_mpc: {exc}".replace("--mpc ", "")) from None
 
     def _resolve_env_fields(self) -> None:
         """Fill the env settings left None (no suite) with `SCENARIO_DEFAULTS`; with a suite, refuse any given."""
@@ -288,6 +315,8 @@ class TrainConfig:
         for key in ("rewards", "constraint"):  # TOML tables / JSON objects of term = weight
             if key in data:
                 data[key] = tuple((str(k), _number(key, k, v)) for k, v in dict(data[key]).items())
+        if isinstance(data.get("demo_mpc"), list):  # a JSON / TOML list of FIELD=VALUE strings
+            data["demo_mpc"] = tuple(data["demo_mpc"])
         return cls(**data)
 
 

@@ -122,10 +122,24 @@ def _chunk(args: tuple) -> list[tuple[dict, np.ndarray, np.ndarray, str]]:
         label, cfg = config.cell_of(s) if isinstance(config, Mix) else ("", config)
         if label not in built:
             env = CrowdNavEnv(cfg)
-            built[label] = env, make_policy(PolicyConfig(name=policy, replan_every_steps=every,
-                                                         **({"mpc": mpc} if mpc else {})), env)
+            expert = make_policy(PolicyConfig(name=policy, replan_every_steps=every, **({"mpc": mpc} if mpc else {})),
+                                 env)
+            built[label] = env, decide_every(expert, every)
         out.append(_episode(*built[label], s, gamma, learner, beta, rng, every))
     return out
+
+
+def decide_every(policy: Any, every: int) -> Any:
+    """`policy` with a learned agent inside it (an SB3 agent, or one behind `+route` / `+shield`) deciding every
+    `every` env steps, the learner's decision period, instead of its own recorded one: an agent expert labels each
+    of the learner's decisions with a decision of its own, as a planner expert re-plans at them (`replan_every_steps`).
+    Planners are returned unchanged."""
+    inner = policy
+    while inner is not None:
+        if hasattr(inner, "decision_every_steps"):
+            inner.decision_every_steps = every
+        inner = getattr(inner, "inner", None)
+    return policy
 
 
 def collect_demos(config: CrowdNavConfig | Mix, policy: str = "mpc-gpgraph", episodes: int = 60, seed: int = 0,

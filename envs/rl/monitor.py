@@ -242,6 +242,10 @@ class TrainMonitor(BaseCallback):
         self.next_eval = max(self.next_eval, (steps // self.cfg.eval_every_steps + 1) * self.cfg.eval_every_steps)
         self.checkpoint()  # after the last evaluation, so that a resume does not repeat it
         save_agent(model, self.out / "final.zip", self.env_config, self._meta(model))
+        if self.cfg.total_steps == 0:
+            print(f"done: no PPO (total_steps 0) in {_hms(self.wall_s)}; agent {self.out / 'final.zip'} (the "
+                  f"{'warm start' if self.cfg.warm_start != 'none' else 'init_from agent'}'s policy)", flush=True)
+            return
         print(f"done: {model.num_timesteps} steps in {_hms(self.wall_s)}; agent {self.out / 'final.zip'}, "
               f"best {self.out / 'checkpoints' / 'best.zip'} (success {self.best_success:.2f}, return "
               f"{self.best_return:.2f}; chosen among the evaluations after training steps)", flush=True)

@@ -109,13 +109,18 @@ def make_model(cfg: TrainConfig, vec_env: Any) -> Any:
 
 def expert_mpc(cfg: TrainConfig) -> Any:
     """The demonstrating MPC's settings: in a suite, the env's MPC with the suite's planner defaults (what
-    `crowdnav benchmark` runs there; in a mix, its first suite's); else None (the env's MPC)."""
-    if not cfg.suite and not cfg.mix:
-        return None
-    from envs.evaluation.suite import load_suite
+    `crowdnav benchmark` runs there; in a mix, its first suite's), else the env's MPC; then `cfg.demo_mpc`'s
+    overrides. None (the env's MPC) when neither a suite nor an override applies."""
+    from dataclasses import replace
+
     from envs.policies import ENV_MPC
 
-    return load_suite(cfg.suite or cfg.mixture().mpc_suite).mpc_config(ENV_MPC)
+    if not cfg.suite and not cfg.mix:
+        return replace(ENV_MPC, **cfg.demo_mpc_overrides()) if cfg.demo_mpc else None
+    from envs.evaluation.suite import load_suite
+
+    base = load_suite(cfg.suite or cfg.mixture().mpc_suite).mpc_config(ENV_MPC)
+    return replace(base, **cfg.demo_mpc_overrides())
 
 
 def warm_start(cfg: TrainConfig, model: Any, out: Path, demos_path: Path | None,
@@ -223,13 +228,14 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
             write_json_atomic(out / "config.json", cfg.to_json())
             write_json_atomic(out / "inputs.json", cfg.input_digests())
             (out / "eval.csv").unlink(missing_ok=True)  # a run stopped before its first checkpoint starts again
-            if cfg.warm_start != "none":
-                monitor.note_warm_start(warm_start(cfg, model, out, demos_path, backend, address))
-            if cfg.init_from:
+            if cfg.init_from:  # before the warm start, whose cloning then continues from it
                 from envs.policies.sb3_files import load_policy_weights
 
-                fresh = load_policy_weights(model, cfg.init_path(), cfg.env_config(), cfg.decision_every_steps)
+                fresh = load_policy_weights(model, cfg.init_path(), cfg.env_config(), cfg.decision_every_steps,
+                                            any_period=cfg.warm_start != "none")
                 print(f"starting from {cfg.init_path()}" + (f" (new: {', '.join(fresh)})" if fresh else ""), flush=True)
+            if cfg.warm_start != "none":
+                monitor.note_warm_start(warm_start(cfg, model, out, demos_path, backend, address))
             monitor.evaluate(model)  # the curve starts at step 0 (the cloned or the random policy): the baseline
             monitor.checkpoint(model)  # resumable from here on
         monitor.safe_steps = model.num_timesteps

@@ -35,7 +35,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
                        "constant-velocity, a checkpoint or module:factory)"),
     "calibration_alpha": (float, "with --calibration: the errors' quantile is the conformal (1 - alpha) one, alpha "
                                  "in (0, 1)"),
-    "total_steps": (int, "agent steps (decisions) to train for, the warm start not counted"),
+    "total_steps": (int, "agent steps (decisions) to train for, the warm start not counted (0: no PPO, the warm "
+                         "start's or --init-from's policy is the result)"),
     "seed": (int, "seed of PPO and of the training episodes (env i first resets with 10000000 + seed + i)"),
     "envs": (int, "parallel envs in each roll-out"),
     "workers": (int, "1: all envs in this process; = --envs: one subprocess per env (SB3's SubprocVecEnv)"),
@@ -51,7 +52,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "log_std_init": (float, "initial log standard deviation of the Gaussian actions (also set after cloning)"),
     "warm_start": (str, "none | bc (clone --demo-policy before PPO) | dagger (then --dagger-rounds of DAgger)"),
     "init_from": (str, "start from this agent's policy: a packaged agent (e.g. ppo-crowdnav-20) or an SB3 .zip with "
-                       "this run's observation and decision period; the optimiser starts afresh (no warm start)"),
+                       "this run's observation (and decision period, unless a warm start re-fits it); the optimiser "
+                       "starts afresh; with --warm-start, cloning continues from it"),
     "demo_policy": (str, "the registry policy that demonstrates and labels (e.g. mpc-cv; a suite's planner "
                          "defaults apply)"),
     "demo_episodes": (int, "demonstration episodes for cloning (seeds --demo-seed onwards)"),
@@ -116,6 +118,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     for name, text in BOOL_HELP.items():
         p.add_argument("--" + name.replace("_", "-"), action=argparse.BooleanOptionalAction,
                        default=argparse.SUPPRESS, dest=name, help=f"{text} (default: {getattr(defaults, name)})")
+    p.add_argument("--demo-mpc", action="append", default=argparse.SUPPRESS, dest="demo_mpc", metavar="FIELD=VALUE",
+                   help="the demonstrating policy's MPC setting (repeatable), as crowdnav benchmark's --mpc: its "
+                        "planner's, or a NAME+shield's shield (e.g. shield_horizon_s=0.5)")
     p.add_argument("--reward", action="append", default=None, metavar="TERM=WEIGHT",
                    help="reward weight override (repeatable): progress, success, collision, discomfort, "
                         "group_intrusion, time")

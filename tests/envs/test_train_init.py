@@ -50,10 +50,28 @@ def test_another_decision_period_or_layout_is_refused(every, pedestrians, says):
         vec.close()
 
 
+def test_a_warm_start_may_refit_the_agent_to_another_period():
+    cfg = TrainConfig(suite="crowdnav-plusplus", decision_every_steps=1, envs=1)
+    vec = make_vec_env(cfg)
+    try:
+        model = make_model(cfg, vec)
+        load_policy_weights(model, AGENTS_DIR / f"{AGENT}.zip", cfg.env_config(), 1, any_period=True)
+        obs = vec.reset()
+        got, _ = model.predict(obs, deterministic=True)
+        want, _ = load_agent(AGENTS_DIR / f"{AGENT}.zip", "PPO", vec.envs[0].unwrapped).predict(obs, deterministic=True)
+    finally:
+        vec.close()
+    assert np.array_equal(got, want)
+
+
 @pytest.mark.parametrize("args, says", [
     (["--init-from", "ppo-crowdnav-2"], "did you mean 'ppo-crowdnav-20'"),
     (["--init-from", "nope.zip"], "no such agent file"),
-    (["--init-from", AGENT, "--warm-start", "bc"], "drop warm_start"),
+    (["--steps", "0"], "needs a policy to keep"),
+    (["--init-from", AGENT, "--demo-mpc", "shield_horizon_s=0.5"], "needs warm_start bc or dagger"),
+    (["--init-from", AGENT, "--warm-start", "dagger", "--demo-mpc", "shield_horizn_s=0.5"],
+     "did you mean 'shield_horizon_s'"),
+    (["--init-from", AGENT, "--warm-start", "dagger", "--demo-mpc", "shield_horizon_s=soon"], "is not a float"),
 ])
 def test_init_from_misuse_is_one_line_and_writes_nothing(args, says, tmp_path, capsys):
     out = tmp_path / "run"
