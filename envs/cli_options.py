@@ -46,11 +46,13 @@ POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "ppo-crowdnav": ("--threads",),
     "ppo-crowdnav-classic": ("--threads",),
     "ppo-crowdnav-20": ("--threads",),
+    "ppo-crowdnav-20-distilled": ("--threads",),
     "ppo-crowdnav-mix": ("--threads",),
 }
 SB3_FLAGS = ("--threads",)
 # registry policies acting on the observation (as sb3: and plug-ins do)
-OBSERVATION_POLICIES = ("ppo-crowdnav", "ppo-crowdnav-classic", "ppo-crowdnav-20", "ppo-crowdnav-mix")
+OBSERVATION_POLICIES = ("ppo-crowdnav", "ppo-crowdnav-classic", "ppo-crowdnav-20", "ppo-crowdnav-20-distilled",
+                        "ppo-crowdnav-mix")
 
 
 def flags_read(name: str) -> tuple[str, ...]:

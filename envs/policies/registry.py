@@ -21,6 +21,9 @@ Registry names:
                   settings"); other envs refuse it (robot model)
     ppo-crowdnav-20  the shipped PPO agent for CrowdNav++'s setting (suite crowdnav-plusplus: 20 ORCA humans who do
                   not see the robot, holonomic robot, 5 m sensor; acts every 0.25 s; same RESULTS section)
+    ppo-crowdnav-20-distilled  the same network re-fitted by DAgger to `ppo-crowdnav-20+shield` deciding every env step
+                  (0.05 s): the shield's corrections learnt, no shield at run time; acts every 0.05 s (RESULTS.md
+                  "RL, the shield distilled into the agent"); crowdnav-plusplus only
     ppo-crowdnav-mix  a generalist (`crowdnav train --mix crowdnav-v1-train-dense`: crowdnav-v1's simulated cells and
                   two recorded crowds outside every test split, also overlaid as dense crowds; 16 wall rays, which
                   `crowdnav benchmark` gives it, and `crowdnav evaluate` with --wall-rays 16; acts every 0.2 s;
@@ -372,6 +375,7 @@ POLICIES: dict[str, Factory] = {
     "ppo-crowdnav": _agent("ppo-crowdnav"),
     "ppo-crowdnav-classic": _agent("ppo-crowdnav-classic"),
     "ppo-crowdnav-20": _agent("ppo-crowdnav-20"),
+    "ppo-crowdnav-20-distilled": _agent("ppo-crowdnav-20-distilled"),
     "ppo-crowdnav-mix": _agent("ppo-crowdnav-mix"),
 }
 

@@ -13,7 +13,8 @@ from envs.policies.identity import agent_observation
 from envs.policies.sb3_actor import mean_actor
 
 CASES = [("ppo-crowdnav", None, None), ("ppo-crowdnav-mix", "crowdnav-v1", "corridor-high-visible"),
-         ("ppo-crowdnav-classic", "crowdnav-classic", "classic-circle5-invisible")]
+         ("ppo-crowdnav-classic", "crowdnav-classic", "classic-circle5-invisible"),
+         ("ppo-crowdnav-20-distilled", "crowdnav-plusplus", "plusplus-circle20-invisible")]
 
 
 @pytest.mark.parametrize(("name", "suite", "cell"), CASES)

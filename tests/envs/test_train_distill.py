@@ -63,3 +63,15 @@ def test_dagger_continues_from_the_agent_and_steps_0_keeps_its_policy(tmp_path):
     # mean |action difference| over 16 observations (actions in [-1, 1])
     near, away = np.abs(clone - agent).mean(), np.abs(far - agent).mean()
     assert 0.0 < near < 0.1 * away
+
+
+def test_the_packaged_distilled_agent_decides_every_env_step_and_records_its_recipe():
+    from envs.policies.sb3_files import decision_period, read_agent
+
+    _, layout = read_agent(AGENTS_DIR / "ppo-crowdnav-20-distilled.zip")
+    recipe = layout["meta"]["train_config"]
+    assert decision_period(layout) == 1 and decision_period(read_agent(AGENTS_DIR / f"{AGENT}.zip")[1]) == 5
+    keys = ("init_from", "warm_start", "demo_policy", "demo_mpc", "total_steps")
+    assert [recipe[k] for k in keys] == [AGENT, "dagger", f"{AGENT}+shield", ["shield_horizon_s=0.5"], 0]
+    env = CrowdNavEnv(TrainConfig(suite="crowdnav-plusplus").env_config())
+    assert make_policy(PolicyConfig(name="ppo-crowdnav-20-distilled"), env).decision_every_steps == 1
