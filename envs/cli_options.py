@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from crowdsim.distributed import BACKENDS
 from crowdsim.names import unknown_name
 from envs.config import DEFAULT_PREDICTOR, REPLAY_SCENARIO
-from envs.policies import ENV_MPC, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
+from envs.policies import ENV_MPC, PACKAGED_AGENTS, POLICIES, REPLAN_EVERY_STEPS, PolicyConfig
 from envs.policies.plugins import SB3_PREFIX
 from envs.policies.wrappers import base_name, split_wrappers
 from planner import CostWeights, ForesightConfig, GuidanceConfig, RouteConfig
@@ -33,6 +33,7 @@ FLAG_FIELDS = {"--predictor": "predictor", "--samples": "n_samples", "--replan-e
 # samples; the baseline MPCs re-plan on their own predictions; social-force acts every step, random reads nothing;
 # orca decides every ORCA step (0.25 s) with the crowd's ORCA settings; ppo-crowdnav is an SB3 agent).
 # PolicyConfig.deterministic has no flag.
+SB3_FLAGS = ("--threads",)  # what an SB3 agent (packaged or sb3:PATH.zip) reads
 POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "mpc-gpgraph": ("--predictor", "--samples", "--replan-every", "--threads", "--mpc"),
     "mpc-oracle": ("--replan-every", "--mpc"),
@@ -43,16 +44,10 @@ POLICY_FLAGS: dict[str, tuple[str, ...]] = {
     "social-force": (),
     "random": (),
     "orca": (),
-    "ppo-crowdnav": ("--threads",),
-    "ppo-crowdnav-classic": ("--threads",),
-    "ppo-crowdnav-20": ("--threads",),
-    "ppo-crowdnav-20-distilled": ("--threads",),
-    "ppo-crowdnav-mix": ("--threads",),
+    **{name: SB3_FLAGS for name in PACKAGED_AGENTS},
 }
-SB3_FLAGS = ("--threads",)
 # registry policies acting on the observation (as sb3: and plug-ins do)
-OBSERVATION_POLICIES = ("ppo-crowdnav", "ppo-crowdnav-classic", "ppo-crowdnav-20", "ppo-crowdnav-20-distilled",
-                        "ppo-crowdnav-mix")
+OBSERVATION_POLICIES = PACKAGED_AGENTS
 
 
 def flags_read(name: str) -> tuple[str, ...]:

@@ -339,6 +339,9 @@ class RandomPolicy:
 
 Factory = Callable[[PolicyConfig, MPCConfig, CrowdNavEnv], Policy]
 AGENTS_DIR = Path(__file__).parent / "agents"
+# the packaged SB3 agents (AGENTS_DIR/NAME.zip), registry policies acting on the observation
+PACKAGED_AGENTS = ("ppo-crowdnav", "ppo-crowdnav-classic", "ppo-crowdnav-20", "ppo-crowdnav-20-distilled",
+                   "ppo-crowdnav-mix")
 
 
 def _planner(name: str, every: int | None = None) -> Factory:
@@ -372,11 +375,7 @@ POLICIES: dict[str, Factory] = {
     "social-force": _planner("social-force", every=1),
     "random": lambda cfg, mpc, env: RandomPolicy(),
     "orca": lambda cfg, mpc, env: _orca_policy(env),
-    "ppo-crowdnav": _agent("ppo-crowdnav"),
-    "ppo-crowdnav-classic": _agent("ppo-crowdnav-classic"),
-    "ppo-crowdnav-20": _agent("ppo-crowdnav-20"),
-    "ppo-crowdnav-20-distilled": _agent("ppo-crowdnav-20-distilled"),
-    "ppo-crowdnav-mix": _agent("ppo-crowdnav-mix"),
+    **{name: _agent(name) for name in PACKAGED_AGENTS},
 }
 
 
