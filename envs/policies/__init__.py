@@ -36,6 +36,7 @@ from envs.policies.registry import (
 
 __all__ = [
     "AGENTS_DIR", "DEFAULT_PREDICTOR", "ENV_MPC", "PACKAGED_AGENTS", "POLICIES", "PREDICTOR_POLICIES",
-    "REPLAN_EVERY_STEPS", "SCENE_TEMPLATE", "GPGraphPolicy", "LegacyPolicy", "PlannerPolicy", "Policy", "PolicyConfig", "RandomPolicy",
+    "REPLAN_EVERY_STEPS", "SCENE_TEMPLATE", "GPGraphPolicy", "LegacyPolicy", "PlannerPolicy", "Policy", "PolicyConfig",
+    "RandomPolicy",
     "act", "decide", "make_policy", "singleton_prediction",
 ]
