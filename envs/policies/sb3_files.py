@@ -189,27 +189,70 @@ def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
         raise ValueError(f"{path}: cannot load its weights ({str(exc).splitlines()[0]})") from exc
 
 
+GROWABLE_KEYS = ("predictions", "prediction_error", "prediction_error_count")  # inputs a run may add to an agent
+GROWN_WEIGHT = "row_enc.0.weight"  # the extractor's first layer over a pedestrian's row (`CrowdAttentionExtractor`)
+
+
+def _grown_keys(saved: dict[str, Any] | None, current: dict[str, Any]) -> list[str]:
+    """The prediction inputs this run observes and the agent did not (`GROWABLE_KEYS`); ValueError naming every
+    other difference between the two observation layouts."""
+    added = [] if saved is None else [k for k in GROWABLE_KEYS if k in current["keys"] and k not in saved["keys"]]
+    if saved is not None:
+        reduced = dict(current, keys={k: v for k, v in current["keys"].items() if k not in added})
+        diff = mismatches(saved, reduced)
+        if diff:
+            raise ValueError(f"the agent was trained on another observation layout: {'; '.join(diff)}")
+    return added
+
+
+def _grow(params: dict[str, Any], own: dict[str, Any]) -> list[str]:
+    """Widen, in place, each saved first row layer (`GROWN_WEIGHT`) to `own`'s wider one: the saved columns first,
+    the new inputs' columns (the extractor appends them to each row) zero, so the policy computes what the agent
+    did. Returns the widened names; ValueError for any other shape that differs."""
+    grown = []
+    for name, value in params.items():
+        want = own.get(name)
+        if want is None or want.shape == value.shape:
+            continue
+        if not (name.endswith(GROWN_WEIGHT) and want.shape[0] == value.shape[0] and want.shape[1] > value.shape[1]):
+            raise ValueError(f"{name} has shape {tuple(value.shape)}, this run's {tuple(want.shape)}")
+        wide = value.new_zeros(want.shape)  # a tensor's own method: torch is not imported here
+        wide[:, :value.shape[1]] = value
+        params[name] = wide
+        grown.append(name)
+    return grown
+
+
 def load_policy_weights(model: Any, path: Path, config: CrowdNavConfig, every: int,
                         any_period: bool = False) -> list[str]:
     """The policy weights of the agent in `path` into `model`'s policy (`weights_only`), to start training from them;
     the optimiser starts afresh. The observation layout and the decision period `every` must be the agent's (the
     period need not with `any_period`: a warm start re-fits the policy to the run's period), and every
     saved weight must fit; weights `model` has and the agent lacks (a constrained PPO's cost critic) keep their
-    initial values and are returned by name. ValueError otherwise."""
+    initial values and are returned by name. The run may observe predictions the agent did not (`GROWABLE_KEYS`):
+    the network grows, its new inputs entering with zero weight (their encoders initial, returned by name, with the
+    widened layers), so it starts as the agent. ValueError otherwise."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
-    _, layout = check_layout(path, config)
+    data, layout = read_agent(path)
+    try:
+        added = _grown_keys(saved_signature(data, layout), signature(config))
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
     if not any_period and decision_period(layout) != every:
         raise ValueError(f"{path}: the agent decides every {decision_period(layout)} env steps, this run every {every}")
     try:  # SB3's reader: torch.load(weights_only=True) of each .pth entry, the "data" entry not read
         _, params, _ = load_from_zip_file(path, load_data=False, device="cpu")
+        grown = _grow(params["policy"], model.policy.state_dict()) if added else []
         missing, unexpected = model.policy.load_state_dict(params["policy"], strict=False)
     except LOAD_ERRORS as exc:
         raise ValueError(f"{path}: cannot load its policy weights ({str(exc).splitlines()[0]})") from exc
-    foreign = [k for k in missing if not k.startswith("cost_net.")]
+    encoders = ("pred_enc.", "calib_enc.") if added else ()  # the new inputs' encoders start as initialised
+    foreign = [k for k in missing if not k.startswith("cost_net.")
+               and not k.split("features_extractor.")[-1].startswith(encoders)]
     if unexpected or foreign:
         raise ValueError(f"{path}: its policy does not fit this run's (missing {foreign}, unexpected {unexpected})")
-    return list(missing)
+    return list(missing) + grown
 
 
 def save_agent(model: Any, path: Path, config: CrowdNavConfig, meta: dict[str, Any] | None = None) -> None:

@@ -233,7 +233,9 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, demos_path: Path | 
 
                 fresh = load_policy_weights(model, cfg.init_path(), cfg.env_config(), cfg.decision_every_steps,
                                             any_period=cfg.warm_start != "none")
-                print(f"starting from {cfg.init_path()}" + (f" (new: {', '.join(fresh)})" if fresh else ""), flush=True)
+                layers = sorted({k.split("features_extractor.")[-1].rsplit(".", 1)[0] for k in fresh})
+                print(f"starting from {cfg.init_path()}" + (f" (new or grown: {', '.join(layers)})" if fresh else ""),
+                      flush=True)
             if cfg.warm_start != "none":
                 monitor.note_warm_start(warm_start(cfg, model, out, demos_path, backend, address))
             monitor.evaluate(model)  # the curve starts at step 0 (the cloned or the random policy): the baseline

@@ -53,7 +53,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "warm_start": (str, "none | bc (clone --demo-policy before PPO) | dagger (then --dagger-rounds of DAgger)"),
     "init_from": (str, "start from this agent's policy: a packaged agent (e.g. ppo-crowdnav-20) or an SB3 .zip with "
                        "this run's observation (and decision period, unless a warm start re-fits it); the optimiser "
-                       "starts afresh; with --warm-start, cloning continues from it"),
+                       "starts afresh; with --warm-start, cloning continues from it; with --predictions the agent's "
+                       "network grows their inputs at zero weight"),
     "demo_policy": (str, "the registry policy that demonstrates and labels (e.g. mpc-cv; a suite's planner "
                          "defaults apply)"),
     "demo_episodes": (int, "demonstration episodes for cloning (seeds --demo-seed onwards)"),

@@ -78,3 +78,32 @@ def test_init_from_misuse_is_one_line_and_writes_nothing(args, says, tmp_path, c
     assert main(["--suite", "crowdnav-plusplus", "--decision-every-steps", "5", "--out", str(out), *args]) == 2
     err = capsys.readouterr().err.strip()
     assert says in err and len(err.splitlines()) == 1 and not out.exists()
+
+
+def test_an_agent_grows_prediction_inputs_and_starts_as_itself():
+    """`--init-from` an agent trained without predictions into a run that observes them (here constant-velocity
+    ones with their calibration): the new inputs enter with zero weight, so the grown policy acts as the agent did
+    on the same scene, while its prediction encoders are fresh and the widened layer is named."""
+    from envs.policies.sb3_files import GROWABLE_KEYS
+
+    cfg = _cfg(predictions=True, predictor="constant-velocity", calibration=True)
+    vec, plain = make_vec_env(cfg), make_vec_env(_cfg())
+    try:
+        model = make_model(cfg, vec)
+        fresh = load_policy_weights(model, cfg.init_path(), cfg.env_config(), cfg.decision_every_steps)
+        agent = load_agent(AGENTS_DIR / f"{AGENT}.zip", "PPO", plain.envs[0].unwrapped)
+        obs = vec.reset()
+        got, want, moved = [], [], []
+        for _ in range(30):
+            moved.append(np.abs(obs["predictions"]).max())
+            got.append(model.predict(obs, deterministic=True)[0])
+            want.append(agent.predict({k: v for k, v in obs.items() if k not in GROWABLE_KEYS}, deterministic=True)[0])
+            obs, *_ = vec.step(got[-1])
+        layer = model.policy.features_extractor.row_enc[0].weight.detach().numpy()
+    finally:
+        vec.close()
+        plain.close()
+    assert np.allclose(got, want, atol=1e-6) and max(moved) > 1.0  # the new inputs carried data meanwhile
+    assert layer.shape[1] == 13 + 32 + 16 and not layer[:, 13:].any() and layer[:, :13].any()
+    assert any(".pred_enc." in k for k in fresh) and any(".calib_enc." in k for k in fresh)
+    assert "features_extractor.row_enc.0.weight" in fresh
