@@ -59,28 +59,34 @@ class SB3Policy:
 
         set_threads(threads)
         try:
-            self.model = load_agent(path, algo, env)
+            self.model = load_agent(path, algo, env, extra_ok=True)  # predictions it was not trained on: ignored
             self.decision_every_steps = decision_period(read_agent(path)[1])
         except ValueError as exc:
             raise ValueError(f"{spec!r}: {exc}") from exc
+        self._keys = list(self.model.observation_space.spaces)  # of the env's observation, those it reads
         self._fast = mean_actor(self.model) if deterministic else None  # predict's action, less overhead
         self._action: np.ndarray | None = None
         self._age = 0  # env steps since the held action was chosen
         self.name, self.deterministic = f"sb3:{path.stem}", deterministic
         try:  # a model trained on another observation layout fails here, not mid-episode
-            self.model.predict(env.observation_space.sample(), deterministic=True)
+            self.model.predict(self._own(env.observation_space.sample()), deterministic=True)
         except (ValueError, RuntimeError, KeyError) as exc:
             raise ValueError(f"{path}: the agent does not fit this env's observation space ({exc})") from exc
 
     def reset(self, seed: int | None = None) -> None:
         self._action, self._age = None, 0
 
+    def _own(self, obs: dict[str, Any]) -> dict[str, Any]:
+        """The keys of `obs` the agent reads (an env may observe predictions it was not trained on)."""
+        return obs if len(obs) == len(self._keys) else {k: obs[k] for k in self._keys}
+
     def act(self, view: PolicyView) -> Decision:
         if self._action is None or self._age >= self.decision_every_steps:
+            obs = self._own(view.obs)
             if self._fast is not None:
-                action = self._fast(view.obs)
+                action = self._fast(obs)
             else:
-                action, _ = self.model.predict(view.obs, deterministic=self.deterministic)
+                action, _ = self.model.predict(obs, deterministic=self.deterministic)
             self._action, self._age = np.asarray(action, np.float32).reshape(2), 0
         self._age += 1
         return Decision(action=self._action.copy())

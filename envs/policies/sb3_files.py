@@ -162,17 +162,29 @@ def agent_class(algo: str, layout: dict[str, Any] | None) -> Any:
     return cls
 
 
-def load_agent(path: Path, algo: str, env: Any) -> Any:
-    """The SB3 model in `path` for this env (its spaces), loaded without unpickling; ValueError otherwise."""
+def load_agent(path: Path, algo: str, env: Any, extra_ok: bool = False) -> Any:
+    """The SB3 model in `path` for this env (its spaces), loaded without unpickling; ValueError otherwise. With
+    `extra_ok` the env may observe predictions the agent was not trained on (`GROWABLE_KEYS`): the model's
+    observation space is then the env's without them, and its user passes it only its own keys."""
+    from gymnasium import spaces
+
     if not path.is_file():
         raise ValueError(f"no such file {path}")
-    data, layout = check_layout(path, env.config)
+    if extra_ok:
+        data, layout = read_agent(path)
+        try:
+            extra = _grown_keys(saved_signature(data, layout), signature(env.config))
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from exc
+    else:
+        (data, layout), extra = check_layout(path, env.config), []
     custom = custom_objects(data, path)
     try:
         cls = agent_class(algo, layout)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
-    custom.update(observation_space=env.observation_space, action_space=env.action_space,
+    space = spaces.Dict({k: v for k, v in env.observation_space.spaces.items() if k not in extra})
+    custom.update(observation_space=space, action_space=env.action_space,
                   policy_class=cls.policy_aliases["MultiInputPolicy"])
     try:
         return cls.load(path, custom_objects=custom, device="cpu")

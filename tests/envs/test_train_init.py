@@ -107,3 +107,26 @@ def test_an_agent_grows_prediction_inputs_and_starts_as_itself():
     assert layer.shape[1] == 13 + 32 + 16 and not layer[:, 13:].any() and layer[:, :13].any()
     assert any(".pred_enc." in k for k in fresh) and any(".calib_enc." in k for k in fresh)
     assert "features_extractor.row_enc.0.weight" in fresh
+
+
+def test_an_agent_expert_reads_only_its_own_keys_in_a_learners_env_with_predictions():
+    """An agent (here the DAgger expert of a run that observes predictions) acts in an env that observes more than it
+    was trained on: it reads its own keys only, so it decides as in its own env, step for step."""
+    from envs.env import CrowdNavEnv
+    from envs.policies import act, make_policy
+
+    plain = _cfg().env_config()
+    wide = _cfg(predictions=True, predictor="constant-velocity").env_config()
+    runs = []
+    for config in (plain, wide):
+        env = CrowdNavEnv(config)
+        policy = make_policy(AGENT, env)
+        env.reset(seed=7)
+        policy.reset(7)
+        actions = []
+        for _ in range(40):
+            actions.append(act(policy, env))
+            env.step(actions[-1])
+        runs.append(np.array(actions))
+    assert "predictions" in CrowdNavEnv(wide).observation_space.spaces
+    assert np.array_equal(runs[0], runs[1]) and np.abs(runs[0]).max() > 0
