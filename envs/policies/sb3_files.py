@@ -130,15 +130,22 @@ def saved_signature(data: dict[str, Any], layout: dict[str, Any] | None) -> dict
     return {"keys": keys} if keys else None
 
 
-def check_layout(path: Path, config: CrowdNavConfig) -> tuple[dict[str, Any], dict[str, Any] | None]:
-    """The "data" and `crowdnav.json` entries of the agent in `path` (`read_agent`); ValueError naming every
-    difference between the agent's observation and this env's."""
+GROWABLE_KEYS = ("predictions", "prediction_error", "prediction_error_count")  # inputs a run may add to an agent
+
+
+def check_layout(path: Path, config: CrowdNavConfig, growable: bool = False
+                 ) -> tuple[dict[str, Any], dict[str, Any] | None, list[str]]:
+    """The "data" and `crowdnav.json` entries of the agent in `path` (`read_agent`) and, with `growable`, the
+    prediction inputs this env observes and the agent did not (`GROWABLE_KEYS`; else []); ValueError naming every
+    other difference between the agent's observation and this env's."""
     data, layout = read_agent(path)
-    saved = saved_signature(data, layout)
-    diff = [] if saved is None else mismatches(saved, signature(config))
+    saved, current = saved_signature(data, layout), signature(config)
+    added = [k for k in GROWABLE_KEYS if k in current["keys"] and k not in saved["keys"]] if growable and saved else []
+    reduced = dict(current, keys={k: v for k, v in current["keys"].items() if k not in added})
+    diff = [] if saved is None else mismatches(saved, reduced)
     if diff:
         raise ValueError(f"{path}: the agent was trained on another observation layout: {'; '.join(diff)}")
-    return data, layout
+    return data, layout, added
 
 
 def agent_class(algo: str, layout: dict[str, Any] | None) -> Any:
@@ -170,14 +177,7 @@ def load_agent(path: Path, algo: str, env: Any, extra_ok: bool = False) -> Any:
 
     if not path.is_file():
         raise ValueError(f"no such file {path}")
-    if extra_ok:
-        data, layout = read_agent(path)
-        try:
-            extra = _grown_keys(saved_signature(data, layout), signature(env.config))
-        except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from exc
-    else:
-        (data, layout), extra = check_layout(path, env.config), []
+    data, layout, extra = check_layout(path, env.config, growable=extra_ok)
     custom = custom_objects(data, path)
     try:
         cls = agent_class(algo, layout)
@@ -201,20 +201,7 @@ def load_parameters(model: Any, path: Path, config: CrowdNavConfig) -> None:
         raise ValueError(f"{path}: cannot load its weights ({str(exc).splitlines()[0]})") from exc
 
 
-GROWABLE_KEYS = ("predictions", "prediction_error", "prediction_error_count")  # inputs a run may add to an agent
 GROWN_WEIGHT = "row_enc.0.weight"  # the extractor's first layer over a pedestrian's row (`CrowdAttentionExtractor`)
-
-
-def _grown_keys(saved: dict[str, Any] | None, current: dict[str, Any]) -> list[str]:
-    """The prediction inputs this run observes and the agent did not (`GROWABLE_KEYS`); ValueError naming every
-    other difference between the two observation layouts."""
-    added = [] if saved is None else [k for k in GROWABLE_KEYS if k in current["keys"] and k not in saved["keys"]]
-    if saved is not None:
-        reduced = dict(current, keys={k: v for k, v in current["keys"].items() if k not in added})
-        diff = mismatches(saved, reduced)
-        if diff:
-            raise ValueError(f"the agent was trained on another observation layout: {'; '.join(diff)}")
-    return added
 
 
 def _grow(params: dict[str, Any], own: dict[str, Any]) -> list[str]:
@@ -246,11 +233,7 @@ def load_policy_weights(model: Any, path: Path, config: CrowdNavConfig, every: i
     widened layers), so it starts as the agent. ValueError otherwise."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
-    data, layout = read_agent(path)
-    try:
-        added = _grown_keys(saved_signature(data, layout), signature(config))
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from exc
+    _, layout, added = check_layout(path, config, growable=True)
     if not any_period and decision_period(layout) != every:
         raise ValueError(f"{path}: the agent decides every {decision_period(layout)} env steps, this run every {every}")
     try:  # SB3's reader: torch.load(weights_only=True) of each .pth entry, the "data" entry not read
