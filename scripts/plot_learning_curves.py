@@ -6,7 +6,8 @@ Each run folder's eval.csv (written by `envs.rl.train`) is one line per curve; t
 the warm start read from its config.json. Wall time includes the warm start (demonstrations, cloning, DAgger).
 Where a run's checkpoints/state.json records DAgger rounds (`warm_start.dagger`), a third panel shows the learner's
 success in its own roll-outs after each round against the expert labels gathered so far (the generalist's curve:
-its training is DAgger; PPO did not improve on it).
+its training is DAgger; PPO did not improve on it). Runs without PPO at all (`--steps 0`) get that panel alone, with
+their selection success at the end.
 
     python scripts/plot_learning_curves.py out/train/v1mix-a out/train/v1mix-b out/train/v1mix-c \
         --out docs/rl/learning_curves_generalist.png --title "ppo-crowdnav-mix: DAgger from mpc-oracle"
@@ -19,6 +20,13 @@ import csv
 import json
 import sys
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # matplotlib itself is imported in main, after the arguments are checked
+    from matplotlib.figure import Figure
+
+Run = tuple[str, dict[str, list[float]]]
 
 
 def read_run(path: Path) -> tuple[str, dict[str, list[float]]]:
@@ -26,7 +34,8 @@ def read_run(path: Path) -> tuple[str, dict[str, list[float]]]:
     if not rows:
         raise ValueError(f"{path}/eval.csv has no rows")
     cfg = json.loads((path / "config.json").read_text())
-    inputs = ("groups" if cfg["groups"] else "no groups") + (", predictions" if cfg["predictions"] else "")
+    source = cfg.get("predictor") if cfg.get("prediction_source", "predictor") == "predictor" else "the oracle's future"
+    inputs = ("groups" if cfg["groups"] else "no groups") + (f", predictions ({source})" if cfg["predictions"] else "")
     label = (f"{path.name}: warm start {cfg['warm_start']}, lr {cfg['learning_rate']:g}, "
              f"target_kl {cfg.get('target_kl')}, {inputs}")
     data = {k: [float(r[k]) for r in rows] for k in ("steps", "wall_s", "success", "collision")}
@@ -68,6 +77,36 @@ def main(argv: list[str] | None = None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if any(dagger) and all(d["steps"] == [0] for _, d in runs):
+        fig = plot_dagger_only(plt, runs, dagger)
+    else:
+        fig = plot_curves(plt, runs, dagger)
+    fig.suptitle(args.title)
+    fig.tight_layout(rect=(0, 0.08 + 0.035 * len(runs), 1, 1))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out, dpi=110)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def plot_dagger_only(plt: ModuleType, runs: list[Run], dagger: list[list[tuple[int, float]]]) -> Figure:
+    """Runs without PPO (``--steps 0``: the policy is the warm start's): one panel, the learner's success in its
+    DAgger roll-outs against the labels so far, and its deterministic selection success (a star at the end)."""
+    fig, ax = plt.subplots(1, 1, figsize=(9, 5))
+    for (label, d), rounds in zip(runs, dagger, strict=True):
+        wall = f", {d['wall_s'][0] / 60:.0f} min"
+        line = ax.plot([n / 1e3 for n, _ in rounds], [v for _, v in rounds], marker="o", label=label + wall)[0]
+        if rounds:
+            ax.plot([rounds[-1][0] / 1e3], d["success"], marker="*", ms=14, color=line.get_color(), ls="none")
+    ax.set(xlabel="expert labels so far (thousands)",
+           ylabel="success: learner's DAgger roll-outs (o), selection seeds (*)", ylim=(0.5, 1.01))
+    ax.grid(alpha=0.3)
+    fig.legend(*ax.get_legend_handles_labels(), loc="lower center", fontsize=8, ncol=1)
+    return fig
+
+
+def plot_curves(plt: ModuleType, runs: list[Run], dagger: list[list[tuple[int, float]]]) -> Figure:
+    """Success and collision against env steps and wall time; the DAgger panel where a run has rounds."""
     panels = 3 if any(dagger) else 2
     fig, axes = plt.subplots(1, panels, figsize=(6.5 * panels, 5))
     for (label, d), rounds in zip(runs, dagger, strict=True):
@@ -84,12 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", fontsize=8, ncol=1)
-    fig.suptitle(args.title)
-    fig.tight_layout(rect=(0, 0.08 + 0.035 * len(runs), 1, 1))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out, dpi=110)
-    print(f"wrote {args.out}")
-    return 0
+    return fig
 
 
 if __name__ == "__main__":
