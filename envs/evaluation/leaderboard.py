@@ -37,6 +37,7 @@ from envs.evaluation.report import (
 from envs.evaluation.stats import aggregate, paired_comparison
 from envs.evaluation.suite import Cell, Suite
 from envs.policies import PolicyConfig
+from envs.policies.identity import agent_observation
 
 POOLS = ("real", "synthetic", "all")
 
@@ -55,13 +56,16 @@ def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig], r
     for r in records:
         by.setdefault((r.cell, r.policy), []).append(r)
     names = [p.name for p in policies]
+    observed = {p.name: pred for p in policies if (pred := observed_predictor(p))}
     board: dict[str, Any] = {
         "suite": suite.name, "version": suite.version, "description": suite.description,
         "policies": {p.name: p.to_json() for p in policies},
         "cells": {c.name: {"spec": c.spec, "seeds": [c.seeds[0], c.seeds[-1]], "results": {},
                            "predictors": {p.name: pred for p in policies
-                                          if (pred := p.for_cell(c.scene, c.predictor).predictor_used())}}
+                                          if (pred := p.for_cell(c.scene, c.predictor).predictor_used()
+                                              or observed.get(p.name))}}
                   for c in cells},
+        "observed_predictions": sorted(observed),
         "pooled": {}, "paired": {},
     }
     for c in cells:
@@ -162,8 +166,18 @@ def leaderboard_markdown(board: dict[str, Any]) -> str:
     return "\n".join(head + body)
 
 
+def observed_predictor(policy: PolicyConfig) -> str | None:
+    """The predictions an SB3 agent observes (`envs.policies.identity.agent_observation`: its training run's
+    predictor, or `oracle` for the true future), which the env runs for it in every episode; None without."""
+    seen = agent_observation(policy)
+    if not seen.get("predictions"):
+        return None
+    return "oracle" if seen.get("prediction_source") == "oracle" else seen.get("predictor")
+
+
 def _predictors(board: dict[str, Any]) -> list[str]:
-    """One line naming the predictor of each policy that runs one, with the cells where it ran it."""
+    """One line naming the predictor of each policy that runs one, with the cells where it ran it (an agent's
+    observed predictions said so)."""
     used: dict[str, dict[str, list[str]]] = {}
     for cell, entry in board["cells"].items():
         for name, pred in entry.get("predictors", {}).items():
@@ -171,8 +185,10 @@ def _predictors(board: dict[str, Any]) -> list[str]:
     if not used:
         return ["Predictors: none of these policies runs one.", ""]
     every = set(board["cells"])
+    seen = set(board.get("observed_predictions", ()))
     parts = [f"{name}: " + "; ".join(f"`{pred}`" + ("" if set(cells) == every else f" ({', '.join(cells)})")
-                                     for pred, cells in by.items()) for name, by in used.items()]
+                                     for pred, cells in by.items())
+             + (" (in the agent's observation)" if name in seen else "") for name, by in used.items()]
     return ["Predictors: " + " · ".join(parts) + ".", ""]
 
 

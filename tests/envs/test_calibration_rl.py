@@ -137,6 +137,10 @@ def test_the_benchmark_observes_what_the_agent_was_trained_to_observe(tmp_path):
     assert by_policy["mpc-cv"] == cell.env_config(cell.seeds[0]).observation
     board = run_benchmark(suite, [cell], [agent], tmp_path / "bench", progress=False)
     assert board["run"]["episodes_run"] == len(cell.seeds)
+    # the leaderboard names what the env predicted for the agent, not "none of these policies runs one"
+    assert board["cells"][cell.name]["predictors"] == {agent.name: "oracle"}
+    assert f"Predictors: {agent.name}: `oracle` (in the agent's observation)." in \
+        (tmp_path / "bench" / "leaderboard.md").read_text()
 
 
 def test_crowdnav_evaluate_observes_what_the_agent_was_trained_to_observe(tmp_path, capsys):
