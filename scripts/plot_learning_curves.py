@@ -99,7 +99,7 @@ def plot_dagger_only(plt: ModuleType, runs: list[Run], dagger: list[list[tuple[i
         if rounds:
             ax.plot([rounds[-1][0] / 1e3], d["success"], marker="*", ms=14, color=line.get_color(), ls="none")
     ax.set(xlabel="expert labels so far (thousands)",
-           ylabel="success: learner's DAgger roll-outs (o), selection seeds (*)", ylim=(0.5, 1.01))
+           ylabel="success: DAgger roll-outs (o), selection (*)", ylim=(0.5, 1.01))
     ax.grid(alpha=0.3)
     fig.legend(*ax.get_legend_handles_labels(), loc="lower center", fontsize=8, ncol=1)
     return fig
