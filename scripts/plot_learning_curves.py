@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # matplotlib itself is imported in main, after the arguments 
 Run = tuple[str, dict[str, list[float]]]
 
 
-def read_run(path: Path) -> tuple[str, dict[str, list[float]]]:
+def read_run(path: Path) -> Run:
     rows = list(csv.DictReader((path / "eval.csv").open()))
     if not rows:
         raise ValueError(f"{path}/eval.csv has no rows")

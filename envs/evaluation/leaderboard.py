@@ -62,8 +62,8 @@ def leaderboard(suite: Suite, cells: list[Cell], policies: list[PolicyConfig], r
         "policies": {p.name: p.to_json() for p in policies},
         "cells": {c.name: {"spec": c.spec, "seeds": [c.seeds[0], c.seeds[-1]], "results": {},
                            "predictors": {p.name: pred for p in policies
-                                          if (pred := p.for_cell(c.scene, c.predictor).predictor_used()
-                                              or observed.get(p.name))}}
+                                          if (pred := observed.get(p.name)
+                                              or p.for_cell(c.scene, c.predictor).predictor_used())}}
                   for c in cells},
         "observed_predictions": sorted(observed),
         "pooled": {}, "paired": {},
